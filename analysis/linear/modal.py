@@ -1,0 +1,140 @@
+"""Normal modes of the underlying linear structure and their exact parameter sensitivities."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+
+__all__ = ["Modes", "modal_analysis", "mode_sensitivities"]
+
+
+@dataclass(frozen=True)
+class Modes:
+    """Mass-normalised real modes with modal damping.
+
+    Attributes
+    ----------
+    omega : ndarray, shape (m,), rad/s
+        Undamped natural angular frequencies, ascending.
+    phi : ndarray, shape (n_dof, m)
+        Mode shapes, ``phi.T @ M @ phi = I``.
+    zeta : ndarray, shape (m,)
+        Modal damping ratios.
+    """
+
+    omega: np.ndarray
+    phi: np.ndarray
+    zeta: np.ndarray
+
+    @property
+    def frequency_hz(self) -> np.ndarray:
+        """Natural frequencies [Hz], shape (m,)."""
+        return self.omega / (2 * np.pi)
+
+    def __len__(self) -> int:
+        return self.omega.size
+
+
+def modal_analysis(
+    M: np.ndarray,
+    K: np.ndarray,
+    zeta: float | np.ndarray | dict[int, float] = 0.01,
+    *,
+    default_zeta: float = 0.01,
+) -> Modes:
+    """All real modes of ``(K, M)`` with damping ratios.
+
+    Parameters
+    ----------
+    M, K : ndarray, shape (n, n)
+        Symmetric mass [kg] and stiffness [N/m] matrices; ``M`` positive definite.
+    zeta : float, ndarray of shape (n,), or dict
+        One ratio for all modes, one per mode, or ``{mode_number (1-based): ratio}`` with
+        ``default_zeta`` for the others.
+
+    Returns
+    -------
+    Modes
+    """
+    lam, phi = sla.eigh(K, M)
+    if lam[0] < -1e-8 * abs(lam[-1]):
+        raise ValueError(
+            f"stiffness matrix is not positive semi-definite (lowest eigenvalue {lam[0]:.3g})"
+        )
+    lam = np.clip(lam, 0.0, None)
+    omega = np.sqrt(lam)
+    n = lam.size
+    if isinstance(zeta, dict):
+        z = np.full(n, float(default_zeta))
+        for mode, value in zeta.items():
+            if 1 <= int(mode) <= n:
+                z[int(mode) - 1] = float(value)
+    else:
+        z = np.broadcast_to(np.asarray(zeta, dtype=float), (n,)).copy()
+    if np.any(z < 0):
+        raise ValueError("modal damping ratios must be >= 0")
+    return Modes(omega=omega, phi=phi, zeta=z)
+
+
+def mode_sensitivities(
+    M: np.ndarray,
+    K: np.ndarray,
+    modes: Modes,
+    dM: dict[str, np.ndarray],
+    dK: dict[str, np.ndarray],
+    which: np.ndarray | None = None,
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Exact derivatives of eigenvalues and mass-normalised mode shapes.
+
+    Solves the bordered system of Nelson's method for each mode::
+
+        [K - lam M   -M phi] [dphi]   [-(dK - lam dM) phi]
+        [-phi^T M       0  ] [dlam] = [ 1/2 phi^T dM phi ]
+
+    Parameters
+    ----------
+    M, K : ndarray, shape (n, n)
+    modes : Modes
+    dM, dK : dict name -> ndarray, shape (n, n)
+        Derivatives of the matrices with respect to each parameter.
+    which : ndarray of int, optional
+        Indices of the modes to differentiate (default: all in ``modes``).
+
+    Returns
+    -------
+    dlam : dict name -> ndarray, shape (len(which),)
+        Derivatives of ``omega**2`` [rad^2/s^2 per parameter unit].
+    dphi : dict name -> ndarray, shape (n, len(which))
+
+    Notes
+    -----
+    Valid for distinct eigenvalues (repeated ones have no unique shape derivative).
+    """
+    names = list(dK)
+    which = np.arange(len(modes)) if which is None else np.asarray(which)
+    n = M.shape[0]
+    dlam = {p: np.empty(which.size) for p in names}
+    dphi = {p: np.empty((n, which.size)) for p in names}
+    A = np.empty((n + 1, n + 1))
+    for j, r in enumerate(which):
+        lam = modes.omega[r] ** 2
+        ph = modes.phi[:, r]
+        Mph = M @ ph
+        A[:n, :n] = K - lam * M
+        A[:n, n] = -Mph
+        A[n, :n] = -Mph
+        A[n, n] = 0.0
+        rhs = np.empty((n + 1, len(names)))
+        for i, p in enumerate(names):
+            dMp = dM.get(p)
+            dKp = dK[p]
+            t = dKp @ ph - (lam * (dMp @ ph) if dMp is not None else 0.0)
+            rhs[:n, i] = -t
+            rhs[n, i] = 0.5 * (ph @ (dMp @ ph)) if dMp is not None else 0.0
+        sol = np.linalg.solve(A, rhs)
+        for i, p in enumerate(names):
+            dphi[p][:, j] = sol[:n, i]
+            dlam[p][j] = sol[n, i]
+    return dlam, dphi

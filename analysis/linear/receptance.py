@@ -1,0 +1,216 @@
+"""Receptances of the underlying linear structure.
+
+:class:`ModalLinearModel` builds receptance blocks ``H[rows, cols](omega)`` by modal
+superposition of the retained modes plus a residual-flexibility correction for the truncated
+ones (the static flexibility not carried by the retained modes), which makes the block exact at
+``omega = 0``. :class:`DirectLinearModel` solves the dynamic stiffness directly: exact for any
+damping matrix, meant for small systems. Both give exact derivatives with respect to parameters
+that enter ``M``, ``K`` (and ``C``).
+
+References
+----------
+R. R. Craig, A. J. Kurdila, *Fundamentals of Structural Dynamics*, 2nd ed., Wiley 2006,
+sec. 11.4 (mode acceleration / residual flexibility).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from analysis.linear.modal import Modes, modal_analysis, mode_sensitivities
+
+__all__ = ["DirectLinearModel", "LinearModel", "ModalLinearModel", "ReceptanceBlock"]
+
+
+class ReceptanceBlock(Protocol):
+    """A receptance sub-matrix as a function of angular frequency."""
+
+    shape: tuple[int, int]
+
+    def __call__(self, omega: np.ndarray) -> np.ndarray:
+        """``H(omega)``, shape (n_omega, n_rows, n_cols), m/N."""
+        ...
+
+    def derivative(self, omega: np.ndarray, param: str) -> np.ndarray:
+        """``dH/dp`` at ``omega``, shape (n_omega, n_rows, n_cols)."""
+        ...
+
+
+class LinearModel(Protocol):
+    """Anything that provides receptance blocks between DOF sets."""
+
+    n_dof: int
+    param_names: tuple[str, ...]
+
+    def block(self, rows: list[int], cols: list[int]) -> ReceptanceBlock: ...
+
+
+@dataclass
+class _ModalBlock:
+    phi_r: np.ndarray  # (nr, m)
+    phi_c: np.ndarray  # (nc, m)
+    omega_r: np.ndarray  # (m,)
+    zeta_r: np.ndarray  # (m,)
+    residual: np.ndarray  # (nr, nc)
+    sens: dict = field(default_factory=dict)  # param -> (dphi_r, dphi_c, dlam, dres)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.residual.shape
+
+    def _g(self, omega: np.ndarray) -> np.ndarray:
+        w = np.asarray(omega, dtype=float)[:, None]
+        wr = self.omega_r[None, :]
+        return 1.0 / (wr**2 - w**2 + 2j * self.zeta_r * wr * w)
+
+    def __call__(self, omega: np.ndarray) -> np.ndarray:
+        g = self._g(omega)
+        return np.einsum("im,wm,jm->wij", self.phi_r, g, self.phi_c) + self.residual
+
+    def derivative(self, omega: np.ndarray, param: str) -> np.ndarray:
+        dphi_r, dphi_c, dlam, dres = self.sens[param]
+        w = np.asarray(omega, dtype=float)[:, None]
+        g = self._g(omega)
+        dwr = dlam / (2 * self.omega_r)
+        dg = -(g**2) * (dlam + 2j * self.zeta_r * dwr * w)
+        out = np.einsum("im,wm,jm->wij", dphi_r, g, self.phi_c)
+        out += np.einsum("im,wm,jm->wij", self.phi_r, g, dphi_c)
+        out += np.einsum("im,wm,jm->wij", self.phi_r, dg, self.phi_c)
+        return out + dres
+
+
+class ModalLinearModel:
+    """Modal receptances with residual flexibility.
+
+    Parameters
+    ----------
+    M, K : ndarray, shape (n, n)
+        Mass [kg] and stiffness [N/m]; ``K`` must be non-singular (a supported structure).
+    zeta : float, ndarray or dict
+        Modal damping (see :func:`analysis.linear.modal.modal_analysis`).
+    f_max_hz : float
+        Modes up to this frequency are retained; the rest enter as residual flexibility.
+    dM, dK : dict name -> ndarray, optional
+        Parameter derivatives for sensitivities (modal damping ratios held fixed).
+    """
+
+    def __init__(
+        self,
+        M: np.ndarray,
+        K: np.ndarray,
+        zeta: float | np.ndarray | dict[int, float] = 0.01,
+        *,
+        default_zeta: float = 0.01,
+        f_max_hz: float = 2000.0,
+        dM: dict[str, np.ndarray] | None = None,
+        dK: dict[str, np.ndarray] | None = None,
+    ) -> None:
+        self.M = np.asarray(M, dtype=float)
+        self.K = np.asarray(K, dtype=float)
+        self.n_dof = self.M.shape[0]
+        self.all_modes = modal_analysis(self.M, self.K, zeta, default_zeta=default_zeta)
+        if self.all_modes.omega[0] <= 0:
+            raise ValueError("the structure has a rigid-body mode: residual flexibility needs supports")
+        keep = np.flatnonzero(self.all_modes.frequency_hz <= f_max_hz)
+        if keep.size == 0:
+            keep = np.arange(1)
+        self.keep = keep
+        self.modes = Modes(
+            self.all_modes.omega[keep], self.all_modes.phi[:, keep], self.all_modes.zeta[keep]
+        )
+        self.dM = dict(dM or {})
+        self.dK = dict(dK or {})
+        self.param_names = tuple(self.dK)
+        self._sens: tuple[dict, dict] | None = None
+        self._static: dict[int, np.ndarray] = {}
+
+    # -- static flexibility columns, cached by DOF
+    def _flex_columns(self, cols: list[int]) -> np.ndarray:
+        missing = [c for c in cols if c not in self._static]
+        if missing:
+            E = np.zeros((self.n_dof, len(missing)))
+            E[missing, range(len(missing))] = 1.0
+            X = np.linalg.solve(self.K, E)
+            for j, c in enumerate(missing):
+                self._static[c] = X[:, j]
+        return np.column_stack([self._static[c] for c in cols])
+
+    def _mode_sens(self) -> tuple[dict, dict]:
+        if self._sens is None:
+            self._sens = mode_sensitivities(self.M, self.K, self.modes, self.dM, self.dK)
+        return self._sens
+
+    def block(self, rows: list[int], cols: list[int]) -> _ModalBlock:
+        """Receptance block between DOF index lists ``rows`` and ``cols``."""
+        rows, cols = list(rows), list(cols)
+        phi = self.modes.phi
+        lam = self.modes.omega**2
+        S = self._flex_columns(cols)
+        residual = S[rows] - (phi[rows] / lam) @ phi[cols].T
+        blk = _ModalBlock(phi[rows], phi[cols], self.modes.omega, self.modes.zeta, residual)
+        if self.param_names:
+            dlam, dphi = self._mode_sens()
+            Sr = self._flex_columns(rows)
+            for p in self.param_names:
+                dS = -(Sr.T @ self.dK[p] @ S)
+                dpr, dpc = dphi[p][rows], dphi[p][cols]
+                dres = dS - (dpr / lam) @ phi[cols].T - (phi[rows] / lam) @ dpc.T
+                dres += (phi[rows] * dlam[p] / lam**2) @ phi[cols].T
+                blk.sens[p] = (dpr, dpc, dlam[p], dres)
+        return blk
+
+
+@dataclass
+class _DirectBlock:
+    model: DirectLinearModel
+    rows: list[int]
+    cols: list[int]
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (len(self.rows), len(self.cols))
+
+    def __call__(self, omega: np.ndarray) -> np.ndarray:
+        H = self.model.full(omega)
+        return H[:, self.rows][:, :, self.cols]
+
+    def derivative(self, omega: np.ndarray, param: str) -> np.ndarray:
+        m = self.model
+        H = m.full(omega)
+        w = np.asarray(omega, dtype=float)[:, None, None]
+        dZ = m.dK.get(param, 0.0) - w**2 * m.dM.get(param, 0.0) + 1j * w * m.dC.get(param, 0.0)
+        dH = -H[:, self.rows] @ dZ @ H[:, :, self.cols]
+        return dH
+
+
+class DirectLinearModel:
+    """Receptances from the dynamic stiffness ``K - omega^2 M + i omega C`` (small systems).
+
+    Parameters
+    ----------
+    M, C, K : ndarray, shape (n, n)
+        Mass, viscous damping and stiffness matrices (any damping, also non-proportional).
+    dM, dC, dK : dict name -> ndarray, optional
+        Parameter derivatives.
+    """
+
+    def __init__(self, M, C, K, *, dM=None, dC=None, dK=None) -> None:
+        self.M = np.atleast_2d(np.asarray(M, dtype=float))
+        self.C = np.atleast_2d(np.asarray(C, dtype=float))
+        self.K = np.atleast_2d(np.asarray(K, dtype=float))
+        self.n_dof = self.M.shape[0]
+        self.dM, self.dC, self.dK = dict(dM or {}), dict(dC or {}), dict(dK or {})
+        self.param_names = tuple(sorted(set(self.dM) | set(self.dC) | set(self.dK)))
+
+    def full(self, omega: np.ndarray) -> np.ndarray:
+        """Full receptance matrix, shape (n_omega, n, n)."""
+        w = np.asarray(omega, dtype=float)[:, None, None]
+        Z = self.K - w**2 * self.M + 1j * w * self.C
+        return np.linalg.inv(Z)
+
+    def block(self, rows: list[int], cols: list[int]) -> _DirectBlock:
+        """Receptance block between DOF index lists ``rows`` and ``cols``."""
+        return _DirectBlock(self, list(rows), list(cols))

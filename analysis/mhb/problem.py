@@ -1,0 +1,149 @@
+"""A locally nonlinear structure set up for multi-harmonic balance.
+
+The balance is written on the nonlinear DOFs only (receptance form): for every harmonic ``k``
+of the base frequency,
+
+    Q_n,k = H_nn(k w) F_nl,k(Q_n) + H_nf(k w) F_ext,k
+
+and every other DOF is recovered afterwards from the converged nonlinear forces,
+
+    Q_o,k = H_on(k w) F_nl,k + H_of(k w) F_ext,k.
+
+References
+----------
+J. V. Ferreira, D. J. Ewins, "Multi-harmonic nonlinear receptance coupling approach",
+Proc. IMAC XV, 1997. T. Abrahamsson et al. / Y. Chen et al. (the reference paper) use this form.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import numpy as np
+
+from analysis.elements.base import NonlinearElement
+from analysis.linear.receptance import LinearModel
+from analysis.mhb.harmonics import HarmonicBasis, base_denominator, order_indices
+
+__all__ = ["Attachment", "HarmonicProblem"]
+
+
+@dataclass(frozen=True)
+class Attachment:
+    """A nonlinear element placed between two structural DOFs (or a DOF and ground).
+
+    Parameters
+    ----------
+    element : NonlinearElement
+    dof_a : int
+        Structural DOF index the element force acts on.
+    dof_b : int or None
+        Second DOF (reaction), ``None`` for ground.
+    name : str
+    param_map : dict
+        Model parameter name -> element parameter name, for sensitivities with respect to
+        model parameters (an element parameter not in the map has no model parameter).
+    """
+
+    element: NonlinearElement
+    dof_a: int
+    dof_b: int | None = None
+    name: str = ""
+    param_map: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class HarmonicProblem:
+    """Linear structure + nonlinear attachments + excitation DOFs + outputs + harmonic basis.
+
+    Parameters
+    ----------
+    linear : LinearModel
+        Provides receptance blocks between DOF sets.
+    attachments : sequence of Attachment
+    force_dofs : list of int
+        DOFs where external forces act (one per column of the force phasors).
+    output_dofs : list of int
+        DOFs whose harmonics are recovered (sensors).
+    orders : sequence of Fraction
+        Orders of the excitation (1, 2, 3 for the reference test; 1/2 for a sub-harmonic).
+    n_harmonics : int
+        Harmonics of the base frequency kept in the balance.
+    n_time : int
+        AFT samples per base period.
+    """
+
+    linear: LinearModel
+    attachments: list[Attachment]
+    force_dofs: list[int]
+    output_dofs: list[int]
+    orders: tuple[Fraction, ...] = (Fraction(1), Fraction(2), Fraction(3))
+    n_harmonics: int = 9
+    n_time: int = 256
+
+    def __post_init__(self) -> None:
+        self.orders = tuple(Fraction(o) for o in self.orders)
+        den = base_denominator(self.orders)
+        self.basis = HarmonicBasis(self.n_harmonics, self.n_time, den)
+        self.order_k = order_indices(self.orders, den)
+        if self.order_k.max() > self.n_harmonics:
+            raise ValueError(
+                f"HarmonicProblem.n_harmonics={self.n_harmonics} is below the highest order "
+                f"({max(self.orders)} = harmonic {self.order_k.max()} of the base)"
+            )
+        nl: list[int] = []
+        for att in self.attachments:
+            for d in (att.dof_a, att.dof_b):
+                if d is not None and d not in nl:
+                    nl.append(d)
+        self.nl_dofs = nl
+        n = len(nl)
+        self.n_nl = n
+        # incidence: relative displacement of element e = L[e] @ q_nl
+        L = np.zeros((len(self.attachments), n))
+        for e, att in enumerate(self.attachments):
+            L[e, nl.index(att.dof_a)] = 1.0
+            if att.dof_b is not None:
+                L[e, nl.index(att.dof_b)] = -1.0
+        self.L = L
+        self.blocks = {
+            "nn": self.linear.block(nl, nl) if n else None,
+            "nf": self.linear.block(nl, self.force_dofs) if n else None,
+            "on": self.linear.block(self.output_dofs, nl) if n else None,
+            "of": self.linear.block(self.output_dofs, self.force_dofs),
+        }
+
+    # ------------------------------------------------------------------------------------
+    @property
+    def denominator(self) -> int:
+        return self.basis.denominator
+
+    def harmonic_omegas(self, omega: float) -> np.ndarray:
+        """Angular frequencies of harmonics ``0..H`` of the base, shape (H+1,), rad/s."""
+        return np.arange(self.n_harmonics + 1) * (omega / self.denominator)
+
+    def force_harmonics(self, force: np.ndarray) -> np.ndarray:
+        """Spread force phasors per order, shape (n_orders, n_f), onto harmonics (H+1, n_f)."""
+        force = np.asarray(force, dtype=complex)
+        if force.ndim == 1:
+            force = force[:, None]
+        if force.shape != (len(self.orders), len(self.force_dofs)):
+            raise ValueError(
+                f"force phasors: expected shape (n_orders={len(self.orders)}, "
+                f"n_force_dofs={len(self.force_dofs)}), got {force.shape}"
+            )
+        Fk = np.zeros((self.n_harmonics + 1, len(self.force_dofs)), dtype=complex)
+        Fk[self.order_k] = force
+        return Fk
+
+    def with_elements(self, elements: list[NonlinearElement]) -> HarmonicProblem:
+        """Same problem with the attachments' elements replaced (same placement)."""
+        atts = [
+            Attachment(el, a.dof_a, a.dof_b, a.name, a.param_map)
+            for el, a in zip(elements, self.attachments, strict=True)
+        ]
+        new = object.__new__(HarmonicProblem)
+        new.__dict__.update(self.__dict__)
+        new.attachments = atts
+        return new

@@ -1,0 +1,268 @@
+"""Newton solution of the multi-harmonic balance at one frequency.
+
+Unknowns are the real Fourier coefficients of the nonlinear DOFs (mean included); nonlinear
+forces come from the alternating frequency-time (AFT) scheme with the analytic Jacobian
+``dF/dX = P diag(df/du) E + omega_b P diag(df/dv) dE`` of each element.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from analysis.mhb.problem import HarmonicProblem
+
+__all__ = ["MHBPoint", "NewtonSettings", "solve_point"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class NewtonSettings:
+    """Newton iteration settings.
+
+    Parameters
+    ----------
+    rtol : float
+        Convergence when ``max|R| <= rtol * max|X| + atol`` (R: balance residual [m]).
+    atol : float
+        Absolute residual floor [m].
+    max_iterations : int
+    max_halvings : int
+        Backtracking steps of the line search on ``|R|``.
+    """
+
+    rtol: float = 1e-10
+    atol: float = 1e-15
+    max_iterations: int = 40
+    max_halvings: int = 10
+
+    def __post_init__(self) -> None:
+        if not (self.rtol > 0 and self.atol >= 0):
+            raise ValueError("NewtonSettings.rtol must be > 0 and atol >= 0")
+        if self.max_iterations < 1:
+            raise ValueError("NewtonSettings.max_iterations must be >= 1")
+
+
+@dataclass
+class MHBPoint:
+    """Periodic solution at one excitation frequency.
+
+    Attributes
+    ----------
+    omega : float
+        Fundamental angular frequency [rad/s].
+    X : ndarray, shape (2H+1, n_nl)
+        Real Fourier coefficients of the nonlinear DOFs [m].
+    q_nl : ndarray, shape (H+1, n_nl), complex
+        Phasors of the nonlinear DOFs per harmonic of the base (index 0: mean) [m].
+    f_nl : ndarray, shape (H+1, n_nl), complex
+        Nonlinear force phasors on those DOFs [N].
+    q_out : ndarray, shape (H+1, n_out), complex
+        Output DOF phasors [m].
+    force : ndarray, shape (H+1, n_f), complex
+        External force phasors per harmonic [N].
+    converged : bool
+    iterations : int
+    residual : float
+        Final ``max|R|`` [m].
+    message : str
+        Why the iteration stopped.
+    """
+
+    omega: float
+    X: np.ndarray
+    q_nl: np.ndarray
+    f_nl: np.ndarray
+    q_out: np.ndarray
+    force: np.ndarray
+    converged: bool
+    iterations: int
+    residual: float
+    message: str
+    order_k: np.ndarray = field(repr=False)
+    lin: dict = field(default_factory=dict, repr=False)
+
+    def outputs(self) -> np.ndarray:
+        """Output phasors at the excitation orders, shape (n_orders, n_out) [m]."""
+        return self.q_out[self.order_k]
+
+    def frf(self, force_column: int = 0) -> np.ndarray:
+        """Multi-harmonic FRFs ``H^nu = Q_nu / F_nu``, shape (n_orders, n_out) [m/N]."""
+        F = self.force[self.order_k, force_column]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.q_out[self.order_k] / F[:, None]
+
+
+def real_operator(Hc: np.ndarray) -> np.ndarray:
+    """Real coefficient operator of complex receptances.
+
+    Parameters
+    ----------
+    Hc : ndarray, shape (H+1, r, c), complex
+        Receptance at harmonics ``0..H`` (harmonic 0 must be real).
+
+    Returns
+    -------
+    ndarray, shape ((2H+1) r, (2H+1) c)
+        ``G`` such that coefficients of ``Re{Hc X}`` are ``G @ x`` (coefficient-major order).
+    """
+    Hn, r, c = Hc.shape
+    H = Hn - 1
+    G = np.zeros((2 * H + 1, r, 2 * H + 1, c))
+    G[0, :, 0, :] = Hc[0].real
+    ia = np.arange(1, 2 * H, 2)
+    ib = ia + 1
+    Hr, Hi = Hc[1:].real, Hc[1:].imag
+    G[ia, :, ia, :] = Hr
+    G[ia, :, ib, :] = Hi
+    G[ib, :, ia, :] = -Hi
+    G[ib, :, ib, :] = Hr
+    return G.reshape((2 * H + 1) * r, (2 * H + 1) * c)
+
+
+def nonlinear_forces(
+    problem: HarmonicProblem, X: np.ndarray, omega_b: float, jacobian: bool = True
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """AFT nonlinear forces on the nonlinear DOFs and their Jacobian.
+
+    Returns
+    -------
+    F : ndarray, shape (2H+1, n_nl)
+    dF : ndarray, shape ((2H+1) n_nl, (2H+1) n_nl) or None
+    """
+    b = problem.basis
+    U = X @ problem.L.T  # (2H+1, n_e)
+    u_t = b.E @ U
+    v_t = omega_b * (b.dE @ U)
+    n, s = problem.n_nl, b.size
+    F = np.zeros((s, n))
+    dF = np.zeros((s, n, s, n)) if jacobian else None
+    for e, att in enumerate(problem.attachments):
+        ev = att.element.evaluate(u_t[:, e], v_t[:, e])
+        Le = problem.L[e]
+        F += np.outer(b.P @ ev.f, Le)
+        if jacobian:
+            D = b.P @ (ev.df_du[:, None] * b.E + (omega_b * ev.df_dv)[:, None] * b.dE)
+            dF += np.einsum("ab,i,j->aibj", D, Le, Le)
+    return F, (dF.reshape(s * n, s * n) if jacobian else None)
+
+
+def _prepare(problem: HarmonicProblem, omega: float, force: np.ndarray) -> dict:
+    w = problem.harmonic_omegas(omega)
+    Fk = problem.force_harmonics(force)
+    prep = {"w": w, "Fk": Fk, "omega_b": omega / problem.denominator}
+    if problem.n_nl:
+        Hnn = problem.blocks["nn"](w)
+        Hnf = problem.blocks["nf"](w)
+        Hnn[0] = Hnn[0].real
+        prep["G"] = real_operator(Hnn)
+        prep["X_lin"] = problem.basis.from_complex(np.einsum("kij,kj->ki", Hnf, Fk))
+    return prep
+
+
+def _recover(problem: HarmonicProblem, prep: dict, F: np.ndarray | None) -> np.ndarray:
+    w, Fk = prep["w"], prep["Fk"]
+    q = np.einsum("kij,kj->ki", problem.blocks["of"](w), Fk)
+    if problem.n_nl and F is not None:
+        Fc = problem.basis.to_complex(F)
+        q += np.einsum("kij,kj->ki", problem.blocks["on"](w), Fc)
+    return q
+
+
+def solve_point(
+    problem: HarmonicProblem,
+    omega: float,
+    force: np.ndarray,
+    X0: np.ndarray | None = None,
+    settings: NewtonSettings | None = None,
+) -> MHBPoint:
+    """Solve the balance at one frequency by damped Newton.
+
+    Parameters
+    ----------
+    problem : HarmonicProblem
+    omega : float
+        Fundamental angular frequency [rad/s].
+    force : ndarray, shape (n_orders, n_f) or (n_orders,), complex
+        External force phasors at the excitation orders [N].
+    X0 : ndarray, shape (2H+1, n_nl), optional
+        Start (warm start from the previous step); default the linear response.
+    settings : NewtonSettings, optional
+
+    Returns
+    -------
+    MHBPoint
+        ``converged`` is False with ``message`` saying why if Newton did not converge.
+    """
+    st = settings or NewtonSettings()
+    prep = _prepare(problem, omega, force)
+    b = problem.basis
+    n = problem.n_nl
+    if n == 0:
+        q_out = _recover(problem, prep, None)
+        return MHBPoint(
+            omega, np.zeros((b.size, 0)), np.zeros((b.n_harmonics + 1, 0), complex),
+            np.zeros((b.n_harmonics + 1, 0), complex), q_out, prep["Fk"], True, 0, 0.0,
+            "linear", problem.order_k,
+        )
+    G, X_lin, wb = prep["G"], prep["X_lin"], prep["omega_b"]
+    X = X_lin.copy() if X0 is None else np.array(X0, dtype=float).reshape(b.size, n)
+    scale = max(np.abs(X_lin).max(), 1e-300)
+
+    def residual(Xc: np.ndarray, jac: bool):
+        F, dF = nonlinear_forces(problem, Xc, wb, jac)
+        R = Xc - (G @ F.ravel()).reshape(b.size, n) - X_lin
+        return R, F, dF
+
+    R, F, dF = residual(X, True)
+    rn = np.abs(R).max()
+    message, converged, it = "maximum iterations reached", False, 0
+    eye = np.eye(b.size * n)
+    for it in range(1, st.max_iterations + 1):
+        if not np.isfinite(rn):
+            message = "non-finite residual"
+            break
+        if rn <= st.rtol * max(np.abs(X).max(), scale) + st.atol:
+            converged, message, it = True, "converged", it - 1
+            break
+        J = eye - G @ dF
+        try:
+            dX = np.linalg.solve(J, -R.ravel()).reshape(b.size, n)
+        except np.linalg.LinAlgError:
+            message = "singular Jacobian"
+            break
+        alpha = 1.0
+        for _ in range(st.max_halvings + 1):
+            Xt = X + alpha * dX
+            Rt, Ft, dFt = residual(Xt, True)
+            rt = np.abs(Rt).max()
+            if np.isfinite(rt) and rt < (1 - 1e-4 * alpha) * rn:
+                break
+            alpha *= 0.5
+        else:
+            if not (np.isfinite(rt) and rt < rn):
+                message = "line search failed (no descent)"
+                break
+        X, R, F, dF, rn = Xt, Rt, Ft, dFt, rt
+    else:
+        if rn <= st.rtol * max(np.abs(X).max(), scale) + st.atol:
+            converged, message = True, "converged"
+    q_out = _recover(problem, prep, F)
+    point = MHBPoint(
+        omega=omega,
+        X=X,
+        q_nl=b.to_complex(X),
+        f_nl=b.to_complex(F),
+        q_out=q_out,
+        force=prep["Fk"],
+        converged=converged,
+        iterations=it,
+        residual=float(rn),
+        message=message,
+        order_k=problem.order_k,
+    )
+    point.lin = {"prep": prep, "dF": dF, "F": F}
+    return point
