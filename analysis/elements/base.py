@@ -6,8 +6,10 @@ the force the element exerts **on the structure at DOF a** (the reaction ``-f`` 
 a linear spring of stiffness ``k`` is therefore ``f = -k u``. This is the sign of ``rig.md``:
 the bump stop pushes the beam tip up (``f > 0``) while the tip is below ``-gap``.
 
-A new element type is one small subclass: set ``kind``, ``param_names`` (and ``option_names``
-if it has non-calibrated settings) and implement :meth:`NonlinearElement._evaluate`.
+A new element type is one small subclass: set ``kind``, ``param_names`` and ``param_units``
+(and ``option_names`` if it has non-calibrated settings, ``positive_params`` /
+``nonnegative_params`` for sign constraints), implement :meth:`NonlinearElement._evaluate` and
+decorate the class with :func:`register`.
 """
 
 from __future__ import annotations
@@ -23,13 +25,42 @@ ELEMENT_TYPES: dict[str, type[NonlinearElement]] = {}
 
 
 def register(cls: type[NonlinearElement]) -> type[NonlinearElement]:
-    """Class decorator: make an element type available by its ``kind`` in model files."""
+    """Class decorator: make an element type available by its ``kind`` in model files.
+
+    Raises
+    ------
+    TypeError
+        If ``kind`` is empty or taken by another class, or the class attributes that
+        describe the parameters are inconsistent.
+    """
+    name = cls.__name__
     if not cls.kind:
-        raise TypeError(f"{cls.__name__}: set the class attribute 'kind'")
+        raise TypeError(f"{name}: set the class attribute 'kind'")
     if cls.kind in ELEMENT_TYPES and ELEMENT_TYPES[cls.kind] is not cls:
         raise TypeError(f"element kind {cls.kind!r} is registered twice")
+    if len(cls.param_units) != len(cls.param_names):
+        raise TypeError(f"{name}: param_units must give one unit per name in param_names")
+    declared = set(cls.positive_params) | set(cls.nonnegative_params) | set(cls.param_defaults)
+    if not declared <= set(cls.param_names):
+        raise TypeError(f"{name}: constraints or defaults name unknown parameters")
+    if set(cls.option_names) & set(cls.param_names):
+        raise TypeError(f"{name}: an option has the name of a parameter")
     ELEMENT_TYPES[cls.kind] = cls
     return cls
+
+
+def _as_number(kind: str, label: str, value: object) -> float:
+    """``value`` as a finite float; booleans and strings are refused."""
+    if not isinstance(value, bool | np.bool_ | str | bytes):
+        try:
+            x = float(value)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            pass
+        else:
+            if not np.isfinite(x):
+                raise ValueError(f"element {kind!r}: {label} is not finite, got {value!r}")
+            return x
+    raise ValueError(f"element {kind!r}: {label} must be a number, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -59,8 +90,23 @@ class NonlinearElement:
     Parameters
     ----------
     **values : float
-        One value per name in ``param_names`` (all required) and optional settings named in
-        ``option_names``.
+        One value per name in ``param_names`` (required unless listed in ``param_defaults``)
+        and optional settings named in ``option_names``.
+
+    Attributes
+    ----------
+    kind : str
+        Registered name, as used in model files.
+    param_names, param_units : tuple of str
+        Calibratable parameters and their units, in the order of ``p`` and ``df_dp``.
+    param_defaults : dict
+        Values of parameters that may be omitted.
+    positive_params, nonnegative_params : tuple of str
+        Parameters that must be ``> 0`` and ``>= 0``; checked on construction.
+    option_names : dict
+        Non-calibrated settings and their defaults (validated by the subclass).
+    options : dict
+        This element's option values.
 
     Notes
     -----
@@ -75,6 +121,9 @@ class NonlinearElement:
     kind: ClassVar[str] = ""
     param_names: ClassVar[tuple[str, ...]] = ()
     param_units: ClassVar[tuple[str, ...]] = ()
+    param_defaults: ClassVar[dict[str, float]] = {}
+    positive_params: ClassVar[tuple[str, ...]] = ()
+    nonnegative_params: ClassVar[tuple[str, ...]] = ()
     option_names: ClassVar[dict[str, object]] = {}
     description: ClassVar[str] = ""
 
@@ -86,26 +135,31 @@ class NonlinearElement:
                 f"expected {list(self.param_names)}"
                 + (f" and options {list(self.option_names)}" if self.option_names else "")
             )
+        values = {**self.param_defaults, **values}
         missing = [n for n in self.param_names if n not in values]
         if missing:
             raise ValueError(f"element {self.kind!r}: missing parameter(s) {missing}")
-        p = np.empty(len(self.param_names))
-        for i, n in enumerate(self.param_names):
-            try:
-                p[i] = float(values[n])
-            except (TypeError, ValueError):
-                raise ValueError(
-                    f"element {self.kind!r}: parameter {n!r} must be a number, got {values[n]!r}"
-                ) from None
-            if not np.isfinite(p[i]):
-                raise ValueError(f"element {self.kind!r}: parameter {n!r} is not finite")
-        self._p = p
+        self._p = np.array(
+            [_as_number(self.kind, f"parameter {n!r}", values[n]) for n in self.param_names]
+        )
+        for n, x in self.params.items():
+            if n in self.positive_params and not x > 0:
+                raise ValueError(f"element {self.kind!r}: parameter {n!r} must be > 0, got {x}")
+            if n in self.nonnegative_params and not x >= 0:
+                raise ValueError(f"element {self.kind!r}: parameter {n!r} must be >= 0, got {x}")
         self.options = {k: values.get(k, d) for k, d in self.option_names.items()}
         self._validate()
 
     # -- subclass hooks -------------------------------------------------------------------
     def _validate(self) -> None:
-        """Check parameter values; raise ``ValueError`` naming the parameter."""
+        """Check option values (and any further parameter rules); raise ``ValueError``.
+
+        Parameters are already finite numbers satisfying the declared sign constraints.
+        """
+
+    def _option_number(self, name: str) -> float:
+        """Option ``name`` as a finite float, or ``ValueError`` naming it."""
+        return _as_number(self.kind, f"option {name!r}", self.options[name])
 
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
         raise NotImplementedError
@@ -127,19 +181,42 @@ class NonlinearElement:
         return type(self)(**values)
 
     def evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool = False) -> ElementEval:
-        """Force and derivatives at samples ``u`` [m] and ``v`` [m/s] of equal shape."""
+        """Force and exact derivatives at a set of samples.
+
+        Parameters
+        ----------
+        u : array_like, shape (...), m
+            Relative displacement ``q_a - q_b``.
+        v : array_like, same shape as `u`, m/s
+            Relative velocity.
+        want_params : bool
+            Also return ``df_dp``, shape ``(n_params, ...)``.
+
+        Returns
+        -------
+        ElementEval
+        """
         u = np.asarray(u, dtype=float)
         v = np.asarray(v, dtype=float)
         if u.shape != v.shape:
-            raise ValueError(f"element {self.kind!r}: u and v shapes differ: {u.shape} vs {v.shape}")
-        return self._evaluate(u, v, want_params)
+            raise ValueError(
+                f"element {self.kind!r}: u and v shapes differ: {u.shape} vs {v.shape}"
+            )
+        out = self._evaluate(u, v, want_params)
+        # Arithmetic on 0-d arrays gives numpy scalars: return arrays for every input shape.
+        return ElementEval(
+            np.asarray(out.f),
+            np.asarray(out.df_du),
+            np.asarray(out.df_dv),
+            None if out.df_dp is None else np.asarray(out.df_dp),
+        )
 
     def force(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Force on DOF a [N] at samples ``u`` [m], ``v`` [m/s]."""
         return self.evaluate(u, v).f
 
     def __repr__(self) -> str:
-        args = ", ".join(f"{k}={v:g}" for k, v in self.params.items())
+        args = ", ".join(f"{k}={v!r}" for k, v in self.params.items())
         opts = "".join(f", {k}={v!r}" for k, v in self.options.items())
         return f"{type(self).__name__}({args}{opts})"
 

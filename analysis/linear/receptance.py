@@ -113,7 +113,9 @@ class ModalLinearModel:
         self.n_dof = self.M.shape[0]
         self.all_modes = modal_analysis(self.M, self.K, zeta, default_zeta=default_zeta)
         if self.all_modes.omega[0] <= 0:
-            raise ValueError("the structure has a rigid-body mode: residual flexibility needs supports")
+            raise ValueError(
+                "the structure has a rigid-body mode: residual flexibility needs supports"
+            )
         keep = np.flatnonzero(self.all_modes.frequency_hz <= f_max_hz)
         if keep.size == 0:
             keep = np.arange(1)

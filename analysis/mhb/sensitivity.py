@@ -128,8 +128,9 @@ def point_sensitivities(
                 dFtot = dFtot + dFp
             dq += np.einsum("kij,kj->ki", Hon, b.to_complex(dFtot))
             if p in lin_names:
-                dq += np.einsum("kij,kj->ki", problem.blocks["on"].derivative(w, p),
-                                b.to_complex(F))
+                dq += np.einsum(
+                    "kij,kj->ki", problem.blocks["on"].derivative(w, p), b.to_complex(F)
+                )
         else:
             dX = np.zeros((b.size, 0))
         if p in lin_names:

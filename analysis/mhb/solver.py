@@ -204,9 +204,17 @@ def solve_point(
     if n == 0:
         q_out = _recover(problem, prep, None)
         return MHBPoint(
-            omega, np.zeros((b.size, 0)), np.zeros((b.n_harmonics + 1, 0), complex),
-            np.zeros((b.n_harmonics + 1, 0), complex), q_out, prep["Fk"], True, 0, 0.0,
-            "linear", problem.order_k,
+            omega,
+            np.zeros((b.size, 0)),
+            np.zeros((b.n_harmonics + 1, 0), complex),
+            np.zeros((b.n_harmonics + 1, 0), complex),
+            q_out,
+            prep["Fk"],
+            True,
+            0,
+            0.0,
+            "linear",
+            problem.order_k,
         )
     G, X_lin, wb = prep["G"], prep["X_lin"], prep["omega_b"]
     X = X_lin.copy() if X0 is None else np.array(X0, dtype=float).reshape(b.size, n)
@@ -234,19 +242,19 @@ def solve_point(
         except np.linalg.LinAlgError:
             message = "singular Jacobian"
             break
-        alpha = 1.0
+        alpha, r2 = 1.0, np.linalg.norm(R)
         for _ in range(st.max_halvings + 1):
             Xt = X + alpha * dX
             Rt, Ft, dFt = residual(Xt, True)
-            rt = np.abs(Rt).max()
-            if np.isfinite(rt) and rt < (1 - 1e-4 * alpha) * rn:
+            rt2 = np.linalg.norm(Rt)
+            if np.isfinite(rt2) and rt2 < (1 - 1e-4 * alpha) * r2:
                 break
             alpha *= 0.5
         else:
-            if not (np.isfinite(rt) and rt < rn):
+            if not (np.isfinite(rt2) and rt2 < r2):
                 message = "line search failed (no descent)"
                 break
-        X, R, F, dF, rn = Xt, Rt, Ft, dFt, rt
+        X, R, F, dF, rn = Xt, Rt, Ft, dFt, np.abs(Rt).max()
     else:
         if rn <= st.rtol * max(np.abs(X).max(), scale) + st.atol:
             converged, message = True, "converged"

@@ -66,6 +66,17 @@ def _substep(problem, omega0, force0, X0, omega1, force1, settings, depth) -> MH
     return point
 
 
+def _force_homotopy(problem, omega, force, settings, n_sub) -> MHBPoint:
+    """Reach a point by raising the force from 1/n_sub of its value (robust first start)."""
+    X, point = None, None
+    for s in range(1, n_sub + 1):
+        point = solve_point(problem, omega, force * (s / n_sub), X, settings)
+        if not point.converged:
+            return point
+        X = point.X
+    return point
+
+
 def solve_steps(
     problem: HarmonicProblem,
     omega: np.ndarray,
@@ -89,8 +100,9 @@ def solve_steps(
     max_substep_depth : int
         When a step fails from the previous solution it is approached in up to
         ``2**max_substep_depth`` sub-steps of frequency and force; then from the linear
-        response. A step that still fails is returned flagged (``converged=False``) with the
-        reason, and the next step starts from the last converged one.
+        response; then by raising the force from a small fraction in as many sub-steps. A
+        step that still fails is returned flagged (``converged=False``) with the reason, and
+        the next step starts from the last converged one.
 
     Returns
     -------
@@ -116,8 +128,9 @@ def solve_steps(
         p = solve_point(problem, omega[i], force[i], X, settings)
         if not p.converged and last is not None:
             for depth in range(1, max_substep_depth + 1):
-                p = _substep(problem, last.omega, last_force, last.X, omega[i], force[i],
-                             settings, depth)
+                p = _substep(
+                    problem, last.omega, last_force, last.X, omega[i], force[i], settings, depth
+                )
                 if p.converged:
                     break
         if not p.converged:
@@ -125,8 +138,13 @@ def solve_steps(
             if q.converged:
                 p = q
         if not p.converged:
-            log.warning("MHB step %d (%.4g Hz) did not converge: %s", i,
-                        omega[i] / (2 * np.pi), p.message)
+            q = _force_homotopy(problem, omega[i], force[i], settings, 2**max_substep_depth)
+            if q.converged:
+                p = q
+        if not p.converged:
+            log.warning(
+                "MHB step %d (%.4g Hz) did not converge: %s", i, omega[i] / (2 * np.pi), p.message
+            )
         else:
             last, last_force, X = p, force[i], p.X
         points.append(p)

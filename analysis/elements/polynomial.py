@@ -1,0 +1,141 @@
+"""Polynomial springs in the relative displacement, and the shared power-series law.
+
+:class:`PowerSeriesElement` is the common kernel of every law that is a weighted sum of powers
+of one kinematic variable: the springs here (powers of ``u``) and the dampers of
+:mod:`analysis.elements.damping` (signed powers of ``v``).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+from .base import ElementEval, NonlinearElement, register
+
+__all__ = [
+    "CubicSpring",
+    "LinearSpring",
+    "PolynomialSpring",
+    "PowerSeriesElement",
+    "QuadraticSpring",
+]
+
+
+def power_basis(
+    x: np.ndarray, powers: tuple[int, ...], signed: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """Basis functions ``g_j(x)`` and their derivatives for a power series.
+
+    Parameters
+    ----------
+    x : ndarray, shape (...)
+        Samples of the variable.
+    powers : tuple of int
+        Exponents ``n_j >= 1``.
+    signed : bool
+        ``g_j = x |x|^(n_j - 1)`` (odd in ``x``) if true, else ``g_j = x^n_j``.
+
+    Returns
+    -------
+    g, dg_dx : ndarray, shape (len(powers), ...)
+    """
+    ax = np.abs(x) if signed else x
+    g = np.stack([x * ax ** (n - 1) for n in powers])
+    dg = np.stack([n * np.abs(x) ** (n - 1) if signed else n * x ** (n - 1) for n in powers])
+    return g, dg
+
+
+class PowerSeriesElement(NonlinearElement):
+    """Base of laws ``f = -sum_j p_j g_j(x)``, one parameter per power (not registered).
+
+    ``x`` is ``u`` (springs) or ``v`` (dampers, ``on_velocity = True``); ``g_j`` is ``x^n_j``,
+    or ``x |x|^(n_j - 1)`` if ``signed`` (see :func:`power_basis`). Subclasses set ``powers``
+    in ``param_names`` order. The laws are smooth (``x |x|`` is once differentiable at 0 with
+    derivative 0), so the derivatives are exact everywhere; ``df_dp_j = -g_j(x)``.
+    """
+
+    powers: ClassVar[tuple[int, ...]] = ()
+    on_velocity: ClassVar[bool] = False
+    signed: ClassVar[bool] = False
+
+    def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
+        x = v if self.on_velocity else u
+        g, dg = power_basis(x, self.powers, self.signed)
+        f = -np.tensordot(self._p, g, axes=1)
+        df_dx = -np.tensordot(self._p, dg, axes=1)
+        zero = np.zeros_like(x)
+        df_du, df_dv = (zero, df_dx) if self.on_velocity else (df_dx, zero)
+        return ElementEval(f, df_du, df_dv, -g if want_params else None)
+
+
+@register
+class LinearSpring(PowerSeriesElement):
+    """Linear spring ``f = -k u``.
+
+    Parameters
+    ----------
+    k : float, N/m
+        Stiffness (any sign: a negative value is a stiffness correction that softens).
+    """
+
+    kind = "linear_spring"
+    param_names = ("k",)
+    param_units = ("N/m",)
+    powers = (1,)
+    description = "linear spring f = -k u"
+
+
+@register
+class QuadraticSpring(PowerSeriesElement):
+    """Quadratic spring ``f = -k2 u^2``.
+
+    Even in ``u``: under a symmetric vibration it produces a mean (static) force, like a
+    preload, and even harmonics.
+
+    Parameters
+    ----------
+    k2 : float, N/m^2
+        Coefficient (any sign).
+    """
+
+    kind = "quadratic_spring"
+    param_names = ("k2",)
+    param_units = ("N/m^2",)
+    powers = (2,)
+    description = "quadratic (even) spring f = -k2 u^2; gives a mean force"
+
+
+@register
+class CubicSpring(PowerSeriesElement):
+    """Cubic (Duffing) spring ``f = -k3 u^3``.
+
+    Parameters
+    ----------
+    k3 : float, N/m^3
+        Coefficient: hardening if positive, softening if negative.
+    """
+
+    kind = "cubic_spring"
+    param_names = ("k3",)
+    param_units = ("N/m^3",)
+    powers = (3,)
+    description = "cubic (Duffing) spring f = -k3 u^3"
+
+
+@register
+class PolynomialSpring(PowerSeriesElement):
+    """Polynomial spring ``f = -sum_{j=1..5} k_j u^j``.
+
+    Parameters
+    ----------
+    k1, k2, k3, k4, k5 : float, N/m^j
+        Coefficients (any sign); omitted ones are 0.
+    """
+
+    kind = "polynomial_spring"
+    param_names = ("k1", "k2", "k3", "k4", "k5")
+    param_units = ("N/m", "N/m^2", "N/m^3", "N/m^4", "N/m^5")
+    param_defaults = dict.fromkeys(param_names, 0.0)
+    powers = (1, 2, 3, 4, 5)
+    description = "polynomial spring f = -sum_j k_j u^j, j = 1..5 (omitted k_j = 0)"

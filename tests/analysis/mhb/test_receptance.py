@@ -1,0 +1,98 @@
+"""Receptances: modal superposition with residual flexibility against the direct solve."""
+
+import numpy as np
+import pytest
+
+from analysis.linear.receptance import DirectLinearModel, ModalLinearModel
+from analysis.linear.reduced import reduced_model
+
+
+def _system(n=12, seed=0):
+    rng = np.random.default_rng(seed)
+    K = np.diag(2 * np.ones(n)) - np.diag(np.ones(n - 1), 1) - np.diag(np.ones(n - 1), -1)
+    K = 1e4 * K + np.diag(rng.random(n) * 1e3)
+    M = np.diag(0.1 + 0.05 * rng.random(n))
+    dK = {"kg": np.diag(np.r_[1.0, np.zeros(n - 1)]), "ks": np.diag(rng.random(n))}
+    dM = {"m3": np.diag(np.eye(n)[3])}
+    return M, K, dM, dK
+
+
+def _modal_C(M, modes, zeta):
+    ph = modes.phi
+    return M @ ph @ np.diag(2 * zeta * modes.omega) @ ph.T @ M
+
+
+def test_all_modes_equal_the_direct_solve():
+    M, K, dM, dK = _system()
+    lm = ModalLinearModel(M, K, 0.02, f_max_hz=1e9)
+    d = DirectLinearModel(M, _modal_C(M, lm.all_modes, 0.02), K)
+    w = np.array([0.0, 30.0, 200.0, 500.0])
+    rows, cols = [0, 4, 7], [4, 11]
+    ref = d.block(rows, cols)(w)
+    assert np.abs(lm.block(rows, cols)(w) - ref).max() <= 1e-10 * np.abs(ref).max()
+
+
+def test_residual_flexibility_makes_truncated_static_response_exact():
+    M, K, dM, dK = _system()
+    lm = ModalLinearModel(M, K, 0.02, f_max_hz=10.0)
+    assert 0 < len(lm.modes) < M.shape[0]
+    H0 = lm.block([0, 5], [5, 9])(np.array([0.0]))[0]
+    assert np.allclose(H0, np.linalg.inv(K)[np.ix_([0, 5], [5, 9])], rtol=1e-12, atol=0)
+
+
+def test_truncation_error_is_small_below_the_retained_band():
+    M, K, dM, dK = _system()
+    lm = ModalLinearModel(M, K, 0.02, f_max_hz=40.0)
+    d = DirectLinearModel(M, _modal_C(M, lm.all_modes, 0.02), K)
+    w = 2 * np.pi * np.array([5.0, 10.0])  # well below the first truncated mode
+    ref = d.block([0, 5], [5])(w)
+    err = np.abs(lm.block([0, 5], [5])(w) - ref).max() / np.abs(ref).max()
+    assert err < 1e-2
+
+
+@pytest.mark.parametrize("f_max", [1e9, 25.0])
+def test_receptance_derivatives_match_finite_differences(f_max):
+    M, K, dM, dK = _system()
+    n_keep = len(ModalLinearModel(M, K, 0.02, f_max_hz=f_max).modes)
+    dK_all = {**dK, "m3": 0 * K}
+    lm = ModalLinearModel(M, K, 0.02, f_max_hz=f_max, dM=dM, dK=dK_all)
+    blk = lm.block([0, 5], [5, 9])
+    w = np.array([0.0, 40.0, 130.0])
+    for p, h in (("kg", 1.0), ("ks", 1.0), ("m3", 1e-5)):  # steps ~1e-4 of the entries
+        dKp, dMp = dK_all[p], dM.get(p, 0 * M)
+
+        def H(s):
+            m = ModalLinearModel(M + s * dMp, K + s * dKp, 0.02, f_max_hz=1e9)
+            m.keep = m.keep[:n_keep]
+            from analysis.linear.modal import Modes
+
+            m.modes = Modes(
+                m.all_modes.omega[:n_keep], m.all_modes.phi[:, :n_keep], m.all_modes.zeta[:n_keep]
+            )
+            return m.block([0, 5], [5, 9])(w)
+
+        fd = (H(h) - H(-h)) / (2 * h)
+        an = blk.derivative(w, p)
+        assert np.abs(an - fd).max() <= 1e-5 * np.abs(fd).max(), p
+
+
+def test_direct_model_derivative_matches_finite_differences():
+    M, K, dM, dK = _system(6)
+    C = 1e-3 * K
+    d = DirectLinearModel(M, C, K, dK={"ks": dK["ks"]}, dC={"ks": 1e-3 * dK["ks"]})
+    w = np.array([10.0, 100.0])
+    h = 1e-4
+    fd = DirectLinearModel(M, C + h * 1e-3 * dK["ks"], K + h * dK["ks"]).block([0], [3])(
+        w
+    ) - DirectLinearModel(M, C - h * 1e-3 * dK["ks"], K - h * dK["ks"]).block([0], [3])(w)
+    fd /= 2 * h
+    assert np.allclose(d.block([0], [3]).derivative(w, "ks"), fd, rtol=1e-6, atol=0)
+
+
+def test_augmented_reduced_model_keeps_static_flexibility_at_loaded_dofs():
+    M, K, dM, dK = _system()
+    lm = ModalLinearModel(M, K, 0.02, f_max_hz=10.0)
+    red = reduced_model(lm, [3, 8])
+    H0 = red.block([0, 3, 8], [3, 8])(np.array([0.0]))[0].real
+    assert np.allclose(H0, np.linalg.inv(K)[np.ix_([0, 3, 8], [3, 8])], rtol=1e-10, atol=0)
+    assert red.size == len(lm.modes) + 2
