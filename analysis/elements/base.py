@@ -151,6 +151,16 @@ class NonlinearElement:
         self._validate()
 
     # -- subclass hooks -------------------------------------------------------------------
+    def switch_threshold(self) -> tuple[float, np.ndarray] | None:
+        """Displacement ``u_s`` where the force jumps, and ``du_s/dp`` (shape (n_params,)).
+
+        Only laws whose force is *discontinuous* at a displacement threshold return one (the
+        paper's contact: its damping term jumps at entry and exit); continuous laws, kinks
+        included, return ``None``. The balance integrates such jumps exactly between AFT
+        samples (:mod:`analysis.mhb.aft`), which keeps its residual continuous.
+        """
+        return None
+
     def _validate(self) -> None:
         """Check option values (and any further parameter rules); raise ``ValueError``.
 

@@ -62,6 +62,10 @@ class HertzContact(OneSidedStop):
         "for u < -gap (side -1) or mirror"
     )
 
+    def switch_threshold(self) -> tuple[float, np.ndarray]:
+        """The damping term jumps at ``u = side * gap``."""
+        return self.side * self._p[1], np.array([0.0, float(self.side), 0.0])
+
     def _evaluate(self, u: np.ndarray, vel: np.ndarray, want_params: bool) -> ElementEval:
         k_c, _, c = self._p
         side = self.side

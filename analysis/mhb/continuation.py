@@ -17,15 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from analysis.mhb.aft import nonlinear_forces
 from analysis.mhb.problem import HarmonicProblem
-from analysis.mhb.solver import (
-    MHBPoint,
-    NewtonSettings,
-    _prepare,
-    _recover,
-    nonlinear_forces,
-    solve_point,
-)
+from analysis.mhb.solver import MHBPoint, NewtonSettings, _prepare, _recover, solve_point
 from analysis.mhb.stability import floquet_exponents
 
 __all__ = ["Branch", "ContinuationSettings", "continue_branch"]

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis.mhb.aft import parameter_forces
 from analysis.mhb.problem import HarmonicProblem
 from analysis.mhb.solver import MHBPoint, real_operator
 
@@ -55,24 +56,6 @@ def parameter_names(problem: HarmonicProblem) -> list[str]:
     return names
 
 
-def _element_dF(problem: HarmonicProblem, X: np.ndarray, omega_b: float) -> dict[str, np.ndarray]:
-    b = problem.basis
-    U = X @ problem.L.T
-    u_t = b.E @ U
-    v_t = omega_b * (b.dE @ U)
-    out: dict[str, np.ndarray] = {}
-    for e, att in enumerate(problem.attachments):
-        if not att.param_map:
-            continue
-        ev = att.element.evaluate(u_t[:, e], v_t[:, e], want_params=True)
-        names = att.element.param_names
-        for model_p, elem_p in att.param_map.items():
-            j = names.index(elem_p)
-            dF = np.outer(b.P @ ev.df_dp[j], problem.L[e])
-            out[model_p] = out.get(model_p, 0.0) + dF
-    return out
-
-
 def point_sensitivities(
     problem: HarmonicProblem, point: MHBPoint, params: list[str] | None = None
 ) -> dict[str, PointSensitivity]:
@@ -107,7 +90,7 @@ def point_sensitivities(
     if n:
         G, dFdX, F = prep["G"], point.lin["dF"], point.lin["F"]
         J = np.eye(b.size * n) - G @ dFdX
-        dF_el = _element_dF(problem, point.X, prep["omega_b"])
+        dF_el = parameter_forces(problem, point.X, prep["omega_b"])
         Hon = problem.blocks["on"](w)
     for p in names:
         dq = np.zeros_like(point.q_out)

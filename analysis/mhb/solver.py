@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from analysis.mhb.aft import nonlinear_forces
 from analysis.mhb.problem import HarmonicProblem
 
 __all__ = ["MHBPoint", "NewtonSettings", "solve_point"]
@@ -121,33 +122,6 @@ def real_operator(Hc: np.ndarray) -> np.ndarray:
     G[ib, :, ia, :] = -Hi
     G[ib, :, ib, :] = Hr
     return G.reshape((2 * H + 1) * r, (2 * H + 1) * c)
-
-
-def nonlinear_forces(
-    problem: HarmonicProblem, X: np.ndarray, omega_b: float, jacobian: bool = True
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """AFT nonlinear forces on the nonlinear DOFs and their Jacobian.
-
-    Returns
-    -------
-    F : ndarray, shape (2H+1, n_nl)
-    dF : ndarray, shape ((2H+1) n_nl, (2H+1) n_nl) or None
-    """
-    b = problem.basis
-    U = X @ problem.L.T  # (2H+1, n_e)
-    u_t = b.E @ U
-    v_t = omega_b * (b.dE @ U)
-    n, s = problem.n_nl, b.size
-    F = np.zeros((s, n))
-    dF = np.zeros((s, n, s, n)) if jacobian else None
-    for e, att in enumerate(problem.attachments):
-        ev = att.element.evaluate(u_t[:, e], v_t[:, e])
-        Le = problem.L[e]
-        F += np.outer(b.P @ ev.f, Le)
-        if jacobian:
-            D = b.P @ (ev.df_du[:, None] * b.E + (omega_b * ev.df_dv)[:, None] * b.dE)
-            dF += np.einsum("ab,i,j->aibj", D, Le, Le)
-    return F, (dF.reshape(s * n, s * n) if jacobian else None)
 
 
 def _prepare(problem: HarmonicProblem, omega: float, force: np.ndarray) -> dict:
