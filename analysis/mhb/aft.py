@@ -21,17 +21,19 @@ from analysis.mhb.harmonics import HarmonicBasis
 __all__ = ["element_forces", "nonlinear_forces", "parameter_forces"]
 
 
-def _rows(b: HarmonicBasis, tau: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Basis row, its first and second tau-derivatives at ``tau``, each shape (2H+1,)."""
+def _rows(b: HarmonicBasis, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Basis rows and their first and second tau-derivatives, each shape (n, 2H+1)."""
     k = np.arange(1, b.n_harmonics + 1)
-    c, s = np.cos(k * tau), np.sin(k * tau)
-    e = np.empty(b.size)
-    de = np.zeros(b.size)
-    dde = np.zeros(b.size)
-    e[0] = 1.0
-    e[1::2], e[2::2] = c, s
-    de[1::2], de[2::2] = -k * s, k * c
-    dde[1::2], dde[2::2] = -(k**2) * c, -(k**2) * s
+    kt = np.outer(np.atleast_1d(tau), k)
+    c, s = np.cos(kt), np.sin(kt)
+    n = kt.shape[0]
+    e = np.empty((n, b.size))
+    de = np.zeros((n, b.size))
+    dde = np.zeros((n, b.size))
+    e[:, 0] = 1.0
+    e[:, 1::2], e[:, 2::2] = c, s
+    de[:, 1::2], de[:, 2::2] = -k * s, k * c
+    dde[:, 1::2], dde[:, 2::2] = -(k**2) * c, -(k**2) * s
     return e, de, dde
 
 
@@ -43,23 +45,26 @@ def _weights(b: HarmonicBasis) -> np.ndarray:
 
 
 def _crossings(b: HarmonicBasis, Ue: np.ndarray, u_t: np.ndarray, u_s: float):
-    """Threshold crossings between consecutive samples, refined on the Fourier series."""
+    """Threshold crossings between consecutive samples, refined on the Fourier series.
+
+    Returns the sample index before each crossing, shape (n_c,), and the phase, shape (n_c,).
+    """
     g = u_t - u_s
     nxt = np.roll(g, -1)
     idx = np.flatnonzero((g > 0) != (nxt > 0))
     dtau = 2 * np.pi / b.n_time
-    out = []
-    for i in idx:
-        g0, g1 = g[i], nxt[i]
-        t = b.tau[i] + dtau * g0 / (g0 - g1) if g0 != g1 else b.tau[i] + 0.5 * dtau
-        for _ in range(3):  # Newton on u(tau) - u_s, safeguarded to the cell
-            e, de, _ = _rows(b, t)
-            d = de @ Ue
-            if d == 0:
-                break
-            t = np.clip(t - (e @ Ue - u_s) / d, b.tau[i], b.tau[i] + dtau)
-        out.append((i, t))
-    return out
+    if idx.size == 0:
+        return idx, np.zeros(0)
+    g0, g1 = g[idx], nxt[idx]
+    lo = b.tau[idx]
+    t = lo + dtau * g0 / (g0 - g1)
+    for _ in range(2):  # Newton on u(tau) - u_s, kept inside the cell
+        e, de, _ = _rows(b, t)
+        d = de @ Ue
+        ok = d != 0
+        t = np.where(ok, t - (e @ Ue - u_s) / np.where(ok, d, 1.0), t)
+        t = np.clip(t, lo, lo + dtau)
+    return idx, t
 
 
 def element_forces(
@@ -101,39 +106,40 @@ def element_forces(
     if sw is None:
         return F, D, dFp
     u_s, dus_dp = sw
+    idx, t = _crossings(b, Ue, u_t, u_s)
+    if idx.size == 0:
+        return F, D, dFp
     w = _weights(b)
     dtau = 2 * np.pi / b.n_time
-    scale = max(abs(u_s), np.abs(u_t).max(), 1e-300)
-    for i, t in _crossings(b, Ue, u_t, u_s):
-        e, de, dde = _rows(b, t)
-        up = de @ Ue  # du/dtau at the crossing
-        if up == 0:
-            continue
-        vs = omega_b * up
-        after = 1.0 if u_t[(i + 1) % b.n_time] > u_s else -1.0
-        eps = 1e-9 * scale
-        ea = element.evaluate(np.array([u_s + after * eps]), np.array([vs]), want_params)
-        eb = element.evaluate(np.array([u_s - after * eps]), np.array([vs]), want_params)
-        J = float(ea.f[0] - eb.f[0])
-        tm = b.tau[i] + 0.5 * dtau
-        s = t - tm
-        ta = 0.5 * (t + tm)
-        phi, dphi, _ = _rows(b, ta)
-        F += w * (-J * s) * phi
-        if jacobian:
-            dt_dU = -e / up  # from u(tau*) = u_s
-            dup_dU = de + (dde @ Ue) * dt_dU
-            dJ_dU = float(ea.df_dv[0] - eb.df_dv[0]) * omega_b * dup_dU
-            D += np.outer(w * phi, -(dJ_dU * s + J * dt_dU))
-            D += np.outer(w * dphi, -J * s * 0.5 * dt_dU)
-        if want_params:
-            dt_dp = dus_dp / up
-            dup_dp = (dde @ Ue) * dt_dp
-            dJ_dp = (ea.df_dp[:, 0] - eb.df_dp[:, 0]) + float(
-                ea.df_dv[0] - eb.df_dv[0]
-            ) * omega_b * dup_dp
-            dFp += np.outer(w * phi, -(dJ_dp * s + J * dt_dp))
-            dFp += np.outer(w * dphi, -J * s * 0.5 * dt_dp)
+    e, de, dde = _rows(b, t)
+    up = de @ Ue  # du/dtau at each crossing, shape (n_c,)
+    keep = up != 0
+    idx, t, e, de, dde, up = idx[keep], t[keep], e[keep], de[keep], dde[keep], up[keep]
+    vs = omega_b * up
+    after = np.where(u_t[(idx + 1) % b.n_time] > u_s, 1.0, -1.0)
+    eps = 1e-9 * max(abs(u_s), np.abs(u_t).max(), 1e-300)
+    both = element.evaluate(
+        np.concatenate([u_s + after * eps, u_s - after * eps]), np.tile(vs, 2), want_params
+    )
+    nc = idx.size
+    J = both.f[:nc] - both.f[nc:]
+    dJ_dv = both.df_dv[:nc] - both.df_dv[nc:]
+    s = t - (b.tau[idx] + 0.5 * dtau)  # offset from the cell boundary the sum assumes
+    phi, dphi, _ = _rows(b, t - 0.5 * s)
+    F += (w * phi).T @ (-J * s)
+    ddU = dde @ Ue
+    if jacobian:
+        dt_dU = -e / up[:, None]  # from u(tau*) = u_s
+        dup_dU = de + ddU[:, None] * dt_dU
+        dJ_dU = (dJ_dv * omega_b)[:, None] * dup_dU
+        D += (w * phi).T @ (-(dJ_dU * s[:, None] + J[:, None] * dt_dU))
+        D += (w * dphi).T @ (-(J * s * 0.5)[:, None] * dt_dU)
+    if want_params:
+        dt_dp = np.outer(1.0 / up, dus_dp)  # (n_c, n_params)
+        dup_dp = ddU[:, None] * dt_dp
+        dJ_dp = (both.df_dp[:, :nc] - both.df_dp[:, nc:]).T + (dJ_dv * omega_b)[:, None] * dup_dp
+        dFp += (w * phi).T @ (-(dJ_dp * s[:, None] + J[:, None] * dt_dp))
+        dFp += (w * dphi).T @ (-(J * s * 0.5)[:, None] * dt_dp)
     return F, D, dFp
 
 

@@ -81,6 +81,7 @@ class HarmonicBasis:
         object.__setattr__(self, "E", E)
         object.__setattr__(self, "dE", dE)
         object.__setattr__(self, "P", (E * w).T.copy())
+        object.__setattr__(self, "_tau", tau)
 
     @property
     def size(self) -> int:
@@ -90,7 +91,7 @@ class HarmonicBasis:
     @property
     def tau(self) -> np.ndarray:
         """Sample phases of the base period, shape (n_time,), rad."""
-        return 2 * np.pi * np.arange(self.n_time) / self.n_time
+        return self._tau
 
     def to_time(self, c: np.ndarray) -> np.ndarray:
         """Samples of signals, shape (n_time, ...) from coefficients of shape (2H+1, ...)."""
