@@ -19,7 +19,7 @@ __all__ = ["DEFAULT_HARMONICS", "DEFAULT_TIME_SAMPLES", "build_linear", "build_p
 #: Harmonics and AFT samples validated on the reference rig against time integration
 #: (``tests/analysis/mhb/test_rig_validation.py``; convergence in H in the README).
 DEFAULT_HARMONICS = 9
-DEFAULT_TIME_SAMPLES = 256
+DEFAULT_TIME_SAMPLES = 128
 
 
 def build_linear(model: Model, *, f_max_hz: float = 2000.0):

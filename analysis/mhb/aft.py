@@ -6,8 +6,9 @@ entry and exit) would make this projection, and so the balance residual, a disco
 function of the unknowns: every time a sample crosses the threshold the residual jumps by
 ``~J/N``, and Newton stalls far above its tolerance. Each threshold crossing between two
 samples is therefore located on the Fourier series itself (``u(tau*) = u_s``) and the jump's
-contribution is integrated exactly: the sampled sum puts the jump at the cell boundary
-``tau_m``, so ``-J (tau* - tau_m) phi(tau_a)`` is added, with its exact derivatives. The residual
+contribution is integrated: the sampled sum puts the jump at the cell boundary ``tau_m``, so
+``-J (tau* - tau_m) phi(tau*)`` is added (error O(dtau^2), the order of the sampling error of a
+kink), with its exact derivatives. The residual
 becomes continuous, Newton converges to its tolerance and the Jacobian includes the jump term
 ``J phi(tau*) e(tau*)^T / u'(tau*)`` (the delta function of ``df/du`` at the jump).
 """
@@ -58,7 +59,7 @@ def _crossings(b: HarmonicBasis, Ue: np.ndarray, u_t: np.ndarray, u_s: float):
     g0, g1 = g[idx], nxt[idx]
     lo = b.tau[idx]
     t = lo + dtau * g0 / (g0 - g1)
-    for _ in range(2):  # Newton on u(tau) - u_s, kept inside the cell
+    for _ in range(1):  # Newton on u(tau) - u_s from the chord: error O(dtau^4)
         e, de, _ = _rows(b, t)
         d = de @ Ue
         ok = d != 0
@@ -125,7 +126,7 @@ def element_forces(
     J = both.f[:nc] - both.f[nc:]
     dJ_dv = both.df_dv[:nc] - both.df_dv[nc:]
     s = t - (b.tau[idx] + 0.5 * dtau)  # offset from the cell boundary the sum assumes
-    phi, dphi, _ = _rows(b, t - 0.5 * s)
+    phi = e  # phi at tau* (the O(s^2) midpoint term is of the sampling error's order)
     F += (w * phi).T @ (-J * s)
     ddU = dde @ Ue
     if jacobian:
@@ -133,13 +134,13 @@ def element_forces(
         dup_dU = de + ddU[:, None] * dt_dU
         dJ_dU = (dJ_dv * omega_b)[:, None] * dup_dU
         D += (w * phi).T @ (-(dJ_dU * s[:, None] + J[:, None] * dt_dU))
-        D += (w * dphi).T @ (-(J * s * 0.5)[:, None] * dt_dU)
+        D += (w * de).T @ (-(J * s)[:, None] * dt_dU)
     if want_params:
         dt_dp = np.outer(1.0 / up, dus_dp)  # (n_c, n_params)
         dup_dp = ddU[:, None] * dt_dp
         dJ_dp = (both.df_dp[:, :nc] - both.df_dp[:, nc:]).T + (dJ_dv * omega_b)[:, None] * dup_dp
         dFp += (w * phi).T @ (-(dJ_dp * s[:, None] + J[:, None] * dt_dp))
-        dFp += (w * dphi).T @ (-(J * s * 0.5)[:, None] * dt_dp)
+        dFp += (w * de).T @ (-(J * s)[:, None] * dt_dp)
     return F, D, dFp
 
 

@@ -123,9 +123,17 @@ def solve_steps(
     points: list[MHBPoint] = []
     last: MHBPoint | None = None
     last_force = None
-    X = X0
+    X, prev = X0, None
     for i in range(omega.size):
-        p = solve_point(problem, omega[i], force[i], X, settings)
+        X_start = X
+        if prev is not None and last is not None and prev.omega != last.omega:
+            # secant predictor along the frequency steps
+            r = (omega[i] - last.omega) / (last.omega - prev.omega)
+            if 0 < r <= 2:
+                X_start = last.X + r * (last.X - prev.X)
+        p = solve_point(problem, omega[i], force[i], X_start, settings)
+        if not p.converged and X_start is not X:
+            p = solve_point(problem, omega[i], force[i], X, settings)
         if not p.converged and last is not None:
             for depth in range(1, max_substep_depth + 1):
                 p = _substep(
@@ -146,6 +154,6 @@ def solve_steps(
                 "MHB step %d (%.4g Hz) did not converge: %s", i, omega[i] / (2 * np.pi), p.message
             )
         else:
-            last, last_force, X = p, force[i], p.X
+            prev, last, last_force, X = last, p, force[i], p.X
         points.append(p)
     return SweepResult(points)

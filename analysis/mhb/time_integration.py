@@ -1,9 +1,10 @@
 """Time integration to periodic steady state: the independent reference for the balance.
 
 The same structure (a :class:`~analysis.linear.reduced.SecondOrderModel`) and the same element
-laws are integrated with scipy's explicit Runge-Kutta (DOP853) one base period at a time until
-the state repeats, as a stepped-sine test would settle; the last period is then projected onto
-the harmonics.
+laws are integrated with scipy's explicit Runge-Kutta (DOP853); the periodic steady state is
+found by shooting (Newton on the period map, started from the previous step's end state) and
+the final period, a plain integrated trajectory that repeats itself, is projected onto the
+harmonics.
 """
 
 from __future__ import annotations
@@ -58,6 +59,58 @@ def time_domain_model(problem: HarmonicProblem) -> SecondOrderModel:
     return reduced_model(problem.linear, list(problem.nl_dofs) + list(problem.force_dofs))
 
 
+def _ode(problem: HarmonicProblem, mdl: SecondOrderModel, omega: float, force: np.ndarray):
+    """Right-hand sides of the state equation and of its variational equation."""
+    T = mdl.T
+    Tn, Tf = T[problem.nl_dofs], T[problem.force_dofs]
+    L = problem.L
+    Fk = problem.force_harmonics(force)
+    kk = np.arange(Fk.shape[0])
+    wb = omega / problem.denominator
+    Minv = np.linalg.inv(mdl.M)
+    A_K, A_C = Minv @ mdl.K, Minv @ mdl.C
+    Bf, Bn = Minv @ Tf.T, Minv @ Tn.T
+    G = L @ Tn  # element relative displacement from z, shape (n_e, m)
+    BG = Bn @ L.T  # acceleration per element force, shape (m, n_e)
+    els = [a.element for a in problem.attachments]
+    m = mdl.size
+
+    def forces(z, zd, jac):
+        u, v = G @ z, G @ zd
+        f = np.empty(len(els))
+        kt = np.empty(len(els))
+        ct = np.empty(len(els))
+        for e, el in enumerate(els):
+            ev = el.evaluate(u[e : e + 1], v[e : e + 1])
+            f[e], kt[e], ct[e] = ev.f[0], ev.df_du[0], ev.df_dv[0]
+        return f, kt, ct
+
+    def rhs(t: float, y: np.ndarray) -> np.ndarray:
+        z, zd = y[:m], y[m : 2 * m]
+        f_ext = (Fk * np.exp(1j * kk * wb * t)[:, None]).sum(axis=0).real
+        acc = Bf @ f_ext - A_K @ z - A_C @ zd
+        if els:
+            f, kt, ct = forces(z, zd, False)
+            acc = acc + BG @ f
+        return np.concatenate([zd, acc])
+
+    def rhs_var(t: float, y: np.ndarray) -> np.ndarray:
+        z, zd = y[:m], y[m : 2 * m]
+        Y = y[2 * m :].reshape(2 * m, 2 * m)
+        f_ext = (Fk * np.exp(1j * kk * wb * t)[:, None]).sum(axis=0).real
+        acc = Bf @ f_ext - A_K @ z - A_C @ zd
+        AK, AC = A_K, A_C
+        if els:
+            f, kt, ct = forces(z, zd, True)
+            acc = acc + BG @ f
+            AK = A_K - (BG * kt) @ G
+            AC = A_C - (BG * ct) @ G
+        dY = np.concatenate([Y[m:], -AK @ Y[:m] - AC @ Y[m:]])
+        return np.concatenate([zd, acc, dY.ravel()])
+
+    return rhs, rhs_var, wb, m
+
+
 def integrate_steady_state(
     problem: HarmonicProblem,
     omega: float,
@@ -66,11 +119,17 @@ def integrate_steady_state(
     *,
     model: SecondOrderModel | None = None,
     rtol: float = 1e-9,
-    periodic_tol: float = 1e-6,
-    max_periods: int = 2000,
-    min_periods: int = 3,
+    periodic_tol: float = 1e-7,
+    max_periods: int = 1500,
+    transient_block: int = 25,
 ) -> SteadyState:
     """Integrate ``M z'' + C z' + K z = B_f^T f(t) + B_n^T f_nl`` to periodic steady state.
+
+    Starting from ``state0`` (as a stepped test starts each step from the previous one's end),
+    the period map ``y0 -> y(T)`` is iterated with Newton's method on ``y(T) - y0 = 0``
+    (shooting), its Jacobian the monodromy matrix from the variational equations; a step that
+    does not reduce the mismatch falls back to plain periods (the physical transient). The
+    result is a trajectory of scipy's DOP853 that repeats itself to ``periodic_tol``.
 
     Parameters
     ----------
@@ -84,66 +143,68 @@ def integrate_steady_state(
         Start state (the previous step's end state); default at rest.
     model : SecondOrderModel, optional
         Default :func:`time_domain_model` of the problem.
+    rtol : float
+        Relative tolerance of the integrator.
     periodic_tol : float
-        Stop when the state repeats over a period to this fraction of its largest entry.
+        Accept when ``max|y(T) - y(0)|`` is below this fraction of ``max|y|``.
+    max_periods : int
+        Bound on the periods integrated.
+    transient_block : int
+        Plain periods integrated when a Newton step does not contract.
 
     Returns
     -------
     SteadyState
     """
     mdl = model or time_domain_model(problem)
-    T = mdl.T
-    Tn = T[problem.nl_dofs]
-    Tf = T[problem.force_dofs]
-    To = T[problem.output_dofs]
-    L = problem.L
-    Fk = problem.force_harmonics(force)
-    kk = np.arange(Fk.shape[0])
-    wb = omega / problem.denominator
-    Minv = np.linalg.inv(mdl.M)
-    A_K = Minv @ mdl.K
-    A_C = Minv @ mdl.C
-    Bf = Minv @ Tf.T
-    Bn = Minv @ Tn.T
-    els = [a.element for a in problem.attachments]
-    m = mdl.size
-
-    def rhs(t: float, y: np.ndarray) -> np.ndarray:
-        z, zd = y[:m], y[m:]
-        f_ext = (Fk * np.exp(1j * kk * wb * t)[:, None]).sum(axis=0).real
-        acc = Bf @ f_ext - A_K @ z - A_C @ zd
-        if els:
-            u = L @ (Tn @ z)
-            v = L @ (Tn @ zd)
-            fe = np.array([el.force(u[e], v[e]) for e, el in enumerate(els)], dtype=float)
-            acc = acc + Bn @ (L.T @ fe)
-        return np.concatenate([zd, acc])
-
+    rhs, rhs_var, wb, m = _ode(problem, mdl, omega, force)
     period = 2 * np.pi / wb
-    y = np.zeros(2 * m) if state0 is None else np.asarray(state0, dtype=float).copy()
     b = problem.basis
     t_eval = np.append(np.arange(b.n_time) * period / b.n_time, period)
-    err, k, sol = np.inf, 0, None
-    for k in range(1, max_periods + 1):
-        sol = solve_ivp(
-            rhs,
-            (0.0, period),
-            y,
-            method="DOP853",
-            rtol=rtol,
-            atol=rtol * max(np.abs(y).max(), 1e-12) * 1e-3,
-            t_eval=t_eval,
-            dense_output=False,
-        )
-        if not sol.success:
-            raise RuntimeError(f"time integration failed at period {k}: {sol.message}")
-        y_new = sol.y[:, -1]
-        scale = max(np.abs(y_new).max(), 1e-300)
-        err = np.abs(y_new - y).max() / scale
-        y = y_new
-        if k >= min_periods and err < periodic_tol:
+    y = np.zeros(2 * m) if state0 is None else np.asarray(state0, dtype=float).copy()
+    I = np.eye(2 * m)
+
+    def one_period(y0, variational):
+        scale = max(np.abs(y0).max(), 1e-12)
+        if variational:
+            sol = solve_ivp(rhs_var, (0.0, period), np.concatenate([y0, I.ravel()]),
+                            method="DOP853", rtol=rtol, atol=rtol * 1e-3 * scale)
+            return sol.y[: 2 * m, -1], sol.y[2 * m :, -1].reshape(2 * m, 2 * m)
+        sol = solve_ivp(rhs, (0.0, period), y0, method="DOP853", rtol=rtol,
+                        atol=rtol * 1e-3 * scale, t_eval=t_eval)
+        return sol, None
+
+    err, periods = np.inf, 0
+    while periods < max_periods:
+        yT, Phi = one_period(y, True)
+        periods += 1
+        r = yT - y
+        err = np.abs(r).max() / max(np.abs(yT).max(), 1e-300)
+        if err < periodic_tol:
             break
-    z_t = sol.y[:m, :-1].T  # (N, m) over the last period, t from 0
+        try:
+            y_new = y + np.linalg.solve(Phi - I, -r)
+        except np.linalg.LinAlgError:
+            y_new = yT
+        yT2, _ = one_period(y_new, True)
+        periods += 1
+        if np.abs(yT2 - y_new).max() < 0.5 * np.abs(r).max():
+            y = y_new
+            continue
+        # Newton did not contract (far from the orbit, e.g. after a jump between branches):
+        # let the physical transient act for a block of periods, then try again.
+        y = yT
+        for _ in range(transient_block):
+            sol, _ = one_period(y, False)
+            y = sol.y[:, -1]
+            periods += 1
+    sol, _ = one_period(y, False)
+    periods += 1
+    z_t = sol.y[:m, :-1].T  # (N, m) over the final period, t from 0
+    To, Tn = mdl.T[problem.output_dofs], mdl.T[problem.nl_dofs]
     q_out = b.to_complex(b.from_time(z_t @ To.T))
     q_nl = b.to_complex(b.from_time(z_t @ Tn.T))
-    return SteadyState(q_out, q_nl, y, k, float(err), bool(err < periodic_tol), problem.order_k)
+    end = sol.y[:, -1]
+    err = np.abs(end - y).max() / max(np.abs(end).max(), 1e-300)
+    return SteadyState(q_out, q_nl, end, periods, float(err), bool(err < 10 * periodic_tol),
+                       problem.order_k)
