@@ -33,12 +33,15 @@ class NewtonSettings:
     max_iterations : int
     max_halvings : int
         Backtracking steps of the line search on ``|R|``.
+    stall_window : int
+        Give up when the residual has not halved over this many iterations.
     """
 
     rtol: float = 1e-10
     atol: float = 1e-15
     max_iterations: int = 40
     max_halvings: int = 10
+    stall_window: int = 8
 
     def __post_init__(self) -> None:
         if not (self.rtol > 0 and self.atol >= 0):
@@ -203,9 +206,14 @@ def solve_point(
     rn = np.abs(R).max()
     message, converged, it = "maximum iterations reached", False, 0
     eye = np.eye(b.size * n)
+    history = []
     for it in range(1, st.max_iterations + 1):
         if not np.isfinite(rn):
             message = "non-finite residual"
+            break
+        history.append(rn)
+        if it > st.stall_window and rn > 0.5 * history[-1 - st.stall_window]:
+            message = f"stalled (residual not halved in {st.stall_window} iterations)"
             break
         if rn <= st.rtol * max(np.abs(X).max(), scale) + st.atol:
             converged, message, it = True, "converged", it - 1

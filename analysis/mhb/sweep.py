@@ -98,11 +98,12 @@ def solve_steps(
     X0 : ndarray, optional
         Start for the first step (default: its linear response).
     max_substep_depth : int
-        When a step fails from the previous solution it is approached in up to
-        ``2**max_substep_depth`` sub-steps of frequency and force; then from the linear
-        response; then by raising the force from a small fraction in as many sub-steps. A
-        step that still fails is returned flagged (``converged=False``) with the reason, and
-        the next step starts from the last converged one.
+        When a step fails from the previous solution (secant-predicted, then as it was) it is
+        started from its linear response (the branch followed may have ended: a jump), then
+        approached in up to ``2**max_substep_depth`` sub-steps of frequency and force, then by
+        raising the force from a small fraction in as many sub-steps. A step that still fails
+        is returned flagged (``converged=False``) with the reason, and the next step starts
+        from the last converged one.
 
     Returns
     -------
@@ -134,6 +135,11 @@ def solve_steps(
         p = solve_point(problem, omega[i], force[i], X_start, settings)
         if not p.converged and X_start is not X:
             p = solve_point(problem, omega[i], force[i], X, settings)
+        if not p.converged:
+            # the branch followed may have ended (a jump): try the linear response first
+            q = solve_point(problem, omega[i], force[i], None, settings)
+            if q.converged:
+                p = q
         if not p.converged and last is not None:
             for depth in range(1, max_substep_depth + 1):
                 p = _substep(
@@ -141,10 +147,6 @@ def solve_steps(
                 )
                 if p.converged:
                     break
-        if not p.converged:
-            q = solve_point(problem, omega[i], force[i], None, settings)
-            if q.converged:
-                p = q
         if not p.converged:
             q = _force_homotopy(problem, omega[i], force[i], settings, 2**max_substep_depth)
             if q.converged:

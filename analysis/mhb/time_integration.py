@@ -167,11 +167,24 @@ def integrate_steady_state(
     def one_period(y0, variational):
         scale = max(np.abs(y0).max(), 1e-12)
         if variational:
-            sol = solve_ivp(rhs_var, (0.0, period), np.concatenate([y0, I.ravel()]),
-                            method="DOP853", rtol=rtol, atol=rtol * 1e-3 * scale)
+            sol = solve_ivp(
+                rhs_var,
+                (0.0, period),
+                np.concatenate([y0, I.ravel()]),
+                method="DOP853",
+                rtol=rtol,
+                atol=rtol * 1e-3 * scale,
+            )
             return sol.y[: 2 * m, -1], sol.y[2 * m :, -1].reshape(2 * m, 2 * m)
-        sol = solve_ivp(rhs, (0.0, period), y0, method="DOP853", rtol=rtol,
-                        atol=rtol * 1e-3 * scale, t_eval=t_eval)
+        sol = solve_ivp(
+            rhs,
+            (0.0, period),
+            y0,
+            method="DOP853",
+            rtol=rtol,
+            atol=rtol * 1e-3 * scale,
+            t_eval=t_eval,
+        )
         return sol, None
 
     err, periods = np.inf, 0
@@ -206,5 +219,6 @@ def integrate_steady_state(
     q_nl = b.to_complex(b.from_time(z_t @ Tn.T))
     end = sol.y[:, -1]
     err = np.abs(end - y).max() / max(np.abs(end).max(), 1e-300)
-    return SteadyState(q_out, q_nl, end, periods, float(err), bool(err < 10 * periodic_tol),
-                       problem.order_k)
+    return SteadyState(
+        q_out, q_nl, end, periods, float(err), bool(err < 10 * periodic_tol), problem.order_k
+    )
