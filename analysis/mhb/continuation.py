@@ -204,7 +204,10 @@ def continue_branch(
         p.lin = {"prep": prep, "dF": dF, "F": F}
         t_new = tangent(X, w, t)
         if np.sign(t_new[-1]) != np.sign(t[-1]):
-            folds.append(len(pts))
+            if folds and len(pts) - folds[-1] <= 2:
+                folds.pop()  # the tangent wobbled across one fold: not a new fold
+            else:
+                folds.append(len(pts))
         pts.append(p)
         y, t = yc, t_new
         ds = min(ds * (1.5 if its <= 4 else 1.0), st.ds_max)

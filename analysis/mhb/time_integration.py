@@ -18,7 +18,7 @@ from scipy.integrate import solve_ivp
 from analysis.linear.reduced import SecondOrderModel, reduced_model
 from analysis.mhb.problem import HarmonicProblem
 
-__all__ = ["SteadyState", "integrate_steady_state", "time_domain_model"]
+__all__ = ["SteadyState", "integrate_steady_state", "state_from_balance", "time_domain_model"]
 
 log = logging.getLogger(__name__)
 
@@ -222,3 +222,25 @@ def integrate_steady_state(
     return SteadyState(
         q_out, q_nl, end, periods, float(err), bool(err < 10 * periodic_tol), problem.order_k
     )
+
+
+def state_from_balance(
+    problem: HarmonicProblem, point, model: SecondOrderModel | None = None
+) -> np.ndarray:
+    """State ``[z, z']`` at ``t = 0`` of a balanced periodic solution, shape (2 m,).
+
+    The generalised coordinates follow from the converged nonlinear and external forces of the
+    point, ``Z_k = (K - (k w)^2 M + i k w C)^-1 T^T F_k``. Used to start a time integration where
+    a stepped test would be: at the previous step's steady state.
+    """
+    mdl = model or time_domain_model(problem)
+    w = problem.harmonic_omegas(point.omega)
+    T = mdl.T
+    Fz = point.force @ T[problem.force_dofs] + point.f_nl @ T[problem.nl_dofs]  # (H+1, m)
+    Z = np.empty_like(Fz)
+    for k, wk in enumerate(w):
+        Z[k] = np.linalg.solve(mdl.K - wk**2 * mdl.M + 1j * wk * mdl.C, Fz[k])
+    Z[0] = Z[0].real
+    z0 = Z.real.sum(axis=0)
+    zd0 = (1j * w[:, None] * Z).real.sum(axis=0)
+    return np.concatenate([z0, zd0])

@@ -135,7 +135,9 @@ class AcquisitionConfig:
 
     def __post_init__(self) -> None:
         if not self.sample_rate_hz > 0:
-            raise ValueError(f"AcquisitionConfig.sample_rate_hz: must be > 0, got {self.sample_rate_hz}")
+            raise ValueError(
+                f"AcquisitionConfig.sample_rate_hz: must be > 0, got {self.sample_rate_hz}"
+            )
         if not self.ai:
             raise ValueError("AcquisitionConfig.ai: at least one input channel is needed")
         names = [c.name for c in self.ai]

@@ -1,0 +1,110 @@
+"""Multi-harmonic FRF figures: magnitude and phase per order, one curve per level."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+__all__ = ["plot_branches", "plot_multiharmonic_frfs"]
+
+
+def plot_multiharmonic_frfs(
+    frequency_hz: np.ndarray,
+    frfs: dict[str, np.ndarray],
+    orders: Sequence[str],
+    sensor_labels: Sequence[str],
+    path: str | Path,
+    *,
+    title: str = "",
+    unit: str = "m/N",
+) -> Path:
+    """Magnitude (log) and phase of ``H^nu`` per order (columns) and sensor (rows).
+
+    Parameters
+    ----------
+    frequency_hz : ndarray, shape (n,)
+        Fundamental frequency of each step [Hz].
+    frfs : dict label -> ndarray, shape (n, n_orders, n_sensors), complex
+        One curve per entry (e.g. per force level).
+    orders : sequence of str
+        Column titles (``"1"``, ``"2"``, ``"3"``).
+    sensor_labels : sequence of str
+        Row titles.
+    path : str or Path
+        PNG file to write.
+    """
+    n_o, n_s = len(orders), len(sensor_labels)
+    fig, axes = plt.subplots(
+        2 * n_s, n_o, figsize=(4.2 * n_o, 2.6 * 2 * n_s), sharex=True, squeeze=False
+    )
+    for label, H in frfs.items():
+        for s in range(n_s):
+            for o in range(n_o):
+                axes[2 * s, o].semilogy(frequency_hz, np.abs(H[:, o, s]), ".-", ms=3, label=label)
+                axes[2 * s + 1, o].plot(frequency_hz, np.degrees(np.angle(H[:, o, s])), ".", ms=3)
+    for o in range(n_o):
+        axes[0, o].set_title(f"order {orders[o]}")
+        axes[-1, o].set_xlabel("fundamental frequency [Hz]")
+    for s in range(n_s):
+        axes[2 * s, 0].set_ylabel(f"{sensor_labels[s]}\n|H| [{unit}]")
+        axes[2 * s + 1, 0].set_ylabel("phase [deg]")
+        for o in range(n_o):
+            axes[2 * s + 1, o].set_ylim(-185, 185)
+            axes[2 * s, o].grid(True, which="both", alpha=0.3)
+            axes[2 * s + 1, o].grid(True, alpha=0.3)
+    axes[0, 0].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_branches(
+    branches: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray | None]],
+    path: str | Path,
+    *,
+    steps: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
+    title: str = "",
+    ylabel: str = "tip amplitude, order 1 [mm]",
+) -> Path:
+    """Continued branches with stable parts solid and unstable parts dashed.
+
+    Parameters
+    ----------
+    branches : dict label -> (frequency_hz (n,), amplitude (n,), stable (n,) bool or None)
+    steps : dict label -> (frequency_hz, amplitude), optional
+        Stepped solutions drawn as markers (what a stepped-sine test follows).
+    path : str or Path
+        PNG file to write.
+    """
+    fig, ax = plt.subplots(figsize=(8, 5))
+    for i, (label, (f, a, stable)) in enumerate(branches.items()):
+        color = f"C{i}"
+        if stable is None:
+            ax.plot(f, a, "-", color=color, label=label)
+            continue
+        st = np.asarray(stable, dtype=float)
+        ax.plot(f, np.where(st > 0, a, np.nan), "-", color=color, label=f"{label} stable")
+        ax.plot(f, np.where(st > 0, np.nan, a), "--", color=color, label=f"{label} unstable")
+    for i, (label, (f, a)) in enumerate((steps or {}).items()):
+        ax.plot(f, a, "o", ms=3, color=f"C{i}", alpha=0.6, label=f"{label} stepped")
+    ax.set_xlabel("fundamental frequency [Hz]")
+    ax.set_ylabel(ylabel)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, ncol=2)
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

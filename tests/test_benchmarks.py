@@ -1,0 +1,23 @@
+"""The benchmark entry point prints figures and, last, one JSON line with the tracked keys."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+
+@pytest.mark.slow
+def test_mhb_benchmark_quick_run_reports_its_keys():
+    r = subprocess.run(
+        [sys.executable, "-m", "benchmarks", "mhb", "--quick"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert r.returncode == 0, r.stderr
+    figures = json.loads(r.stdout.strip().splitlines()[-1])
+    for key in ("sweep_s", "ms_per_point", "converged_fraction", "ti_ratio", "max_rel_diff"):
+        assert key in figures
+    assert figures["converged_fraction"] == 1.0
+    assert figures["max_rel_diff"] <= 0.01
