@@ -14,7 +14,14 @@ from analysis.linear.receptance import DirectLinearModel, ModalLinearModel
 from analysis.mhb.problem import Attachment, HarmonicProblem
 from analysis.model import Assembly, DofRef, Model
 
-__all__ = ["DEFAULT_HARMONICS", "DEFAULT_TIME_SAMPLES", "build_linear", "build_problem"]
+__all__ = [
+    "DEFAULT_HARMONICS",
+    "DEFAULT_TIME_SAMPLES",
+    "attachments",
+    "build_linear",
+    "build_problem",
+    "build_problem_dofs",
+]
 
 #: Harmonics and AFT samples validated on the reference rig against time integration
 #: (``tests/analysis/mhb/test_rig_validation.py``; convergence in H in the README).
@@ -88,7 +95,21 @@ def build_problem(
         sensitivities are with respect to model parameters.
     """
     asm = model.assemble()
-    lin = linear if linear is not None else build_linear(model, f_max_hz=f_max_hz)
+    return build_problem_dofs(
+        model,
+        [asm.point_dof(drive_point)],
+        [asm.point_dof(p) for p in output_points],
+        orders=orders,
+        n_harmonics=n_harmonics,
+        n_time=n_time,
+        f_max_hz=f_max_hz,
+        linear=linear,
+    )
+
+
+def attachments(model: Model) -> list[Attachment]:
+    """The model's nonlinear elements placed on their structural DOFs."""
+    asm = model.assemble()
     atts = []
     for spec, element in model.build_elements():
         pmap = {ref: name for name, ref in spec.params.items() if isinstance(ref, str)}
@@ -101,11 +122,27 @@ def build_problem(
                 pmap,
             )
         )
+    return atts
+
+
+def build_problem_dofs(
+    model: Model,
+    force_dofs: Sequence[int],
+    output_dofs: Sequence[int],
+    *,
+    orders: Sequence[Fraction | int] = (1, 2, 3),
+    n_harmonics: int = DEFAULT_HARMONICS,
+    n_time: int = DEFAULT_TIME_SAMPLES,
+    f_max_hz: float = 2000.0,
+    linear=None,
+) -> HarmonicProblem:
+    """Balance problem with forces and outputs at structural DOF indices of ``model``."""
+    lin = linear if linear is not None else build_linear(model, f_max_hz=f_max_hz)
     return HarmonicProblem(
         lin,
-        atts,
-        [asm.point_dof(drive_point)],
-        [asm.point_dof(p) for p in output_points],
+        attachments(model),
+        list(force_dofs),
+        list(output_dofs),
         orders=tuple(Fraction(o) for o in orders),
         n_harmonics=n_harmonics,
         n_time=n_time,

@@ -1,0 +1,1 @@
+"""Model calibration: linear (damping equalization) and nonlinear (multi-harmonic FRFs)."""

@@ -1,0 +1,152 @@
+"""Levenberg-Marquardt and undamped Gauss-Newton on bounded, scaled least squares.
+
+Minimises ``cost = 1/2 |r(theta)|^2`` with the analytic Jacobian. The damping follows Marquardt
+(``(J^T J + lam diag(J^T J)) step = -J^T r``), raised on a rejected step and lowered on an
+accepted one; ``lam = 0`` throughout gives the undamped Gauss-Newton of the paper's
+cross-validation. Steps are projected onto the bounds.
+
+References
+----------
+D. W. Marquardt, "An algorithm for least-squares estimation of nonlinear parameters",
+J. SIAM 11 (1963) 431-441.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["LeastSquaresResult", "least_squares_lm"]
+
+
+@dataclass
+class LeastSquaresResult:
+    """Result of :func:`least_squares_lm` (fields as scipy.optimize results).
+
+    Attributes
+    ----------
+    x : ndarray, shape (n,)
+        Solution in scaled coordinates.
+    cost : float
+        ``1/2 |r|^2`` at ``x``.
+    fun : ndarray, shape (m,)
+        Residuals at ``x``.
+    jac : ndarray, shape (m, n)
+    cov : ndarray, shape (n, n)
+        ``(J^T J)^-1`` (the covariance for a unit-variance weighted residual).
+    nfev, njev, nit : int
+    success : bool
+    message : str
+    history : list of dict
+        Per iteration: ``iteration, cost, lam, x, step_norm``.
+    """
+
+    x: np.ndarray
+    cost: float
+    fun: np.ndarray
+    jac: np.ndarray
+    cov: np.ndarray
+    nfev: int
+    njev: int
+    nit: int
+    success: bool
+    message: str
+    history: list[dict] = field(default_factory=list)
+
+
+def least_squares_lm(
+    fun: Callable[[np.ndarray, bool], tuple[np.ndarray, np.ndarray | None]],
+    x0: np.ndarray,
+    *,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    damped: bool = True,
+    lam0: float = 1e-3,
+    max_iterations: int = 50,
+    ftol: float = 1e-8,
+    xtol: float = 1e-8,
+    callback: Callable[[dict], None] | None = None,
+) -> LeastSquaresResult:
+    """Bounded Levenberg-Marquardt (or undamped Gauss-Newton with ``damped=False``).
+
+    Parameters
+    ----------
+    fun : callable
+        ``fun(x, want_jac) -> (r, J)``: residuals shape (m,), Jacobian shape (m, n) or None.
+        Non-finite residuals mark an infeasible point (the step is rejected).
+    x0 : ndarray, shape (n,)
+    bounds : (lower, upper), optional
+    damped : bool
+        False: plain Gauss-Newton steps (still projected onto the bounds, halved if they
+        increase the cost).
+    ftol, xtol : float
+        Stop when the relative cost decrease and the step (relative to ``|x| + xtol``) are small.
+    callback : callable, optional
+        Called with each history entry.
+    """
+    x = np.asarray(x0, dtype=float).copy()
+    lo, hi = bounds if bounds is not None else (np.full_like(x, -np.inf), np.full_like(x, np.inf))
+    r, J = fun(x, True)
+    nfev, njev = 1, 1
+    if not np.all(np.isfinite(r)):
+        raise ValueError("the start point gives non-finite residuals")
+    cost = 0.5 * float(r @ r)
+    lam = lam0 if damped else 0.0
+    history = [{"iteration": 0, "cost": cost, "lam": lam, "x": x.tolist(), "step_norm": 0.0}]
+    if callback:
+        callback(history[-1])
+    message, success, it = "maximum iterations reached", False, 0
+    for it in range(1, max_iterations + 1):
+        A = J.T @ J
+        g = J.T @ r
+        d = np.diag(A).copy()
+        d[d <= 0] = 1.0
+        accepted, factor, step = False, 1.0, None
+        for _ in range(12):
+            if damped or step is None:
+                M = A + lam * np.diag(d)
+                try:
+                    step = np.linalg.solve(M, -g)
+                except np.linalg.LinAlgError:
+                    step = -np.linalg.lstsq(M, g, rcond=None)[0]
+            x_new = np.clip(x + factor * step, lo, hi)
+            r_new, _ = fun(x_new, False)
+            nfev += 1
+            cost_new = 0.5 * float(r_new @ r_new) if np.all(np.isfinite(r_new)) else np.inf
+            if cost_new < cost:
+                accepted = True
+                break
+            if damped:
+                lam = max(lam * 5.0, 1e-6)
+            else:
+                factor *= 0.5  # undamped: the Gauss-Newton direction, shortened
+        if not accepted:
+            message, success = "no step reduces the cost (at a minimum within tolerance)", True
+            break
+        step_norm = float(np.linalg.norm(x_new - x))
+        rel_dec = (cost - cost_new) / max(cost, 1e-300)
+        x = x_new
+        r, J = fun(x, True)
+        nfev += 1
+        njev += 1
+        cost = 0.5 * float(r @ r)
+        if damped:
+            lam = max(lam / 3.0, 1e-12)
+        history.append(
+            {"iteration": it, "cost": cost, "lam": lam, "x": x.tolist(), "step_norm": step_norm}
+        )
+        if callback:
+            callback(history[-1])
+        if rel_dec < ftol and step_norm < xtol * (np.linalg.norm(x) + xtol):
+            message, success = "converged (cost and step below tolerance)", True
+            break
+        if rel_dec < ftol:
+            message, success = "converged (relative cost decrease below ftol)", True
+            break
+    JTJ = J.T @ J
+    try:
+        cov = np.linalg.inv(JTJ)
+    except np.linalg.LinAlgError:
+        cov = np.linalg.pinv(JTJ)
+    return LeastSquaresResult(x, cost, r, J, cov, nfev, njev, it, success, message, history)

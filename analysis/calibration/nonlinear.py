@@ -1,0 +1,354 @@
+"""Nonlinear calibration: Latin hypercube starts, then Levenberg-Marquardt (the paper's method).
+
+>>> result = calibrate_nonlinear(model, data)            # doctest: +SKIP
+>>> result.parameters["gap"], result.std["gap"]           # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import logging
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from analysis.calibration.lhs import Distribution, latin_hypercube, paper_distributions
+from analysis.calibration.lm import LeastSquaresResult, least_squares_lm
+from analysis.calibration.objective import FRFObjective
+from analysis.calibration.parameters import ParameterSpace
+from analysis.measurement_file import SteppedSineData, read_measurement
+from analysis.model import Model
+from analysis.predict import SteppedSinePredictor
+
+__all__ = ["CalibrationSettings", "NonlinearCalibration", "calibrate_nonlinear", "level_rows"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """Settings of a nonlinear calibration.
+
+    Parameters
+    ----------
+    parameters : tuple of str
+        Calibrated model parameters.
+    calibration_levels_n : tuple of float, optional
+        Force levels [N] used (default: all but ``validation_level_n``).
+    validation_level_n : float or None
+        Level kept out for validation (default: the highest level of the file when it has at
+        least two; ``0`` keeps none out).
+    channels : tuple of str, optional
+        Response channels compared (default: every motion channel but the drive force).
+    weighting : {"uncertainty", "identity"}
+    n_starts : int
+        Latin hypercube realisations (the paper: 100).
+    n_lm_starts : int
+        Best candidates refined by LM (the paper: 1).
+    seed : int
+    distributions : mapping name -> Distribution, optional
+        Default: the paper's (k_c, gap, v_c).
+    max_iterations : int
+    n_harmonics, n_time : int
+    """
+
+    parameters: tuple[str, ...] = ("k_c", "gap", "v_c")
+    calibration_levels_n: tuple[float, ...] | None = None
+    validation_level_n: float | None = None
+    channels: tuple[str, ...] | None = None
+    weighting: str = "uncertainty"
+    n_starts: int = 100
+    n_lm_starts: int = 1
+    seed: int = 0
+    distributions: Mapping[str, Distribution] | None = None
+    max_iterations: int = 50
+    n_harmonics: int = 9
+    n_time: int = 128
+
+    def __post_init__(self) -> None:
+        if not self.parameters:
+            raise ValueError("CalibrationSettings.parameters: name at least one parameter")
+        if self.n_starts < 1 or self.n_lm_starts < 1 or self.n_lm_starts > self.n_starts:
+            raise ValueError("CalibrationSettings: need 1 <= n_lm_starts <= n_starts")
+        if self.weighting not in ("uncertainty", "identity"):
+            raise ValueError("CalibrationSettings.weighting: 'uncertainty' or 'identity'")
+
+    def to_json(self) -> dict:
+        d = {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "distributions"}
+        d["distributions"] = (
+            None
+            if self.distributions is None
+            else {k: v.to_json() for k, v in self.distributions.items()}
+        )
+        return d
+
+
+def level_rows(data: SteppedSineData, levels_n: Sequence[float]) -> np.ndarray:
+    """Row indices of the steps at the given target levels."""
+    idx = [int(np.argmin(np.abs(data.levels_n - lv))) for lv in levels_n]
+    for lv, i in zip(levels_n, idx, strict=True):
+        if not np.isclose(data.levels_n[i], lv, rtol=1e-6):
+            raise ValueError(f"{data.path}: no level {lv} N (levels: {list(data.levels_n)})")
+    return np.flatnonzero(np.isin(data.level_index, idx))
+
+
+def split_levels(data: SteppedSineData, settings: CalibrationSettings):
+    """(calibration levels, validation level or None) for a file."""
+    levels = sorted(float(x) for x in data.levels_n)
+    val = settings.validation_level_n
+    if val is None:
+        val = levels[-1] if len(levels) >= 2 else None
+    elif val == 0:
+        val = None
+    cal = settings.calibration_levels_n
+    if cal is None:
+        cal = tuple(lv for lv in levels if val is None or not np.isclose(lv, val))
+    return tuple(cal), val
+
+
+@dataclass
+class NonlinearCalibration:
+    """Result of :func:`calibrate_nonlinear`.
+
+    Attributes
+    ----------
+    parameters : dict name -> float
+        Calibrated values (physical units).
+    cov : ndarray, shape (n, n)
+        Parameter covariance (physical units): ``(J^T W J)^-1`` for uncertainty weighting,
+        scaled by the residual variance for identity weighting.
+    std, correlation
+        From ``cov``.
+    chi2_per_dof : float
+        ``2 cost / (m - n)``.
+    starts : ndarray, shape (n_starts, n)
+        Latin hypercube candidates; ``start_costs`` their metric.
+    lm : LeastSquaresResult
+        The refinement (scaled coordinates) with its history.
+    """
+
+    parameters: dict[str, float]
+    cov: np.ndarray
+    chi2_per_dof: float
+    n_residuals: int
+    starts: np.ndarray
+    start_costs: np.ndarray
+    lm: LeastSquaresResult
+    space: ParameterSpace
+    settings: CalibrationSettings
+    calibration_levels_n: tuple[float, ...]
+    validation_level_n: float | None
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def std(self) -> dict[str, float]:
+        return dict(zip(self.space.names, np.sqrt(np.diag(self.cov)).tolist(), strict=True))
+
+    @property
+    def correlation(self) -> np.ndarray:
+        s = np.sqrt(np.diag(self.cov))
+        return self.cov / np.outer(s, s)
+
+    def calibrated_model(self, model: Model) -> Model:
+        """``model`` with the calibrated values."""
+        return model.with_values(self.parameters)
+
+    def to_json(self) -> dict:
+        names = list(self.space.names)
+        return {
+            "parameters": self.parameters,
+            "std": self.std,
+            "cov": self.cov.tolist(),
+            "correlation": self.correlation.tolist(),
+            "names": names,
+            "chi2_per_dof": self.chi2_per_dof,
+            "n_residuals": self.n_residuals,
+            "calibration_levels_n": list(self.calibration_levels_n),
+            "validation_level_n": self.validation_level_n,
+            "best_start": dict(
+                zip(names, self.starts[int(np.argmin(self.start_costs))].tolist(), strict=True)
+            ),
+            "starts": self.starts.tolist(),
+            "start_costs": [None if not np.isfinite(c) else float(c) for c in self.start_costs],
+            "lm": {
+                "success": self.lm.success,
+                "message": self.lm.message,
+                "nit": self.lm.nit,
+                "nfev": self.lm.nfev,
+                "cost": self.lm.cost,
+                "history": [
+                    {
+                        **h,
+                        "parameters": dict(
+                            zip(
+                                names,
+                                self.space.to_physical(np.array(h["x"])).tolist(),
+                                strict=True,
+                            )
+                        ),
+                    }
+                    for h in self.lm.history
+                ],
+            },
+            "settings": self.settings.to_json(),
+            "timings": self.timings,
+        }
+
+
+# -- objective construction, also inside worker processes -------------------------------
+@dataclass(frozen=True)
+class ObjectiveSpec:
+    """Everything needed to rebuild an :class:`FRFObjective` in another process (picklable)."""
+
+    model_toml: str
+    data_path: str
+    names: tuple[str, ...]
+    mask: np.ndarray
+    weighting: str
+    channels: tuple[str, ...] | None
+    n_harmonics: int
+    n_time: int
+
+    def build(self) -> FRFObjective:
+        model = Model.from_toml_text(self.model_toml, source="<calibration model>")
+        data = read_measurement(self.data_path)
+        pred = SteppedSinePredictor(
+            model, data, channels=self.channels, n_harmonics=self.n_harmonics, n_time=self.n_time
+        )
+        return FRFObjective(
+            pred, ParameterSpace.from_model(model, self.names), self.mask, self.weighting
+        )
+
+
+_WORKER_CACHE: dict[int, FRFObjective] = {}
+
+
+def _evaluate_chunk(spec: ObjectiveSpec, thetas: np.ndarray) -> list[float]:
+    key = hash(
+        (
+            spec.model_toml,
+            spec.data_path,
+            spec.names,
+            spec.mask.tobytes(),
+            spec.weighting,
+            spec.channels,
+        )
+    )
+    obj = _WORKER_CACHE.get(key)
+    if obj is None:
+        _WORKER_CACHE.clear()
+        obj = _WORKER_CACHE[key] = spec.build()
+    return [obj.cost(t) for t in thetas]
+
+
+def evaluate_costs(
+    spec: ObjectiveSpec,
+    thetas: np.ndarray,
+    executor: cf.Executor | None = None,
+    local: FRFObjective | None = None,
+) -> np.ndarray:
+    """Metric at many scaled points, on ``executor`` if given (chunks per worker)."""
+    if executor is None:
+        obj = local or spec.build()
+        return np.array([obj.cost(t) for t in thetas])
+    n_chunks = max(1, min(len(thetas), 4 * (getattr(executor, "_max_workers", 2) or 2)))
+    chunks = np.array_split(thetas, n_chunks)
+    futures = [executor.submit(_evaluate_chunk, spec, c) for c in chunks if len(c)]
+    return np.concatenate([f.result() for f in futures])
+
+
+def calibrate_nonlinear(
+    model: Model,
+    data: SteppedSineData,
+    settings: CalibrationSettings | None = None,
+    *,
+    executor: cf.Executor | None = None,
+    progress: Callable[[str, dict], None] | None = None,
+) -> NonlinearCalibration:
+    """Calibrate nonlinear parameters on multi-harmonic FRFs (paper sec. 2.3).
+
+    Parameters
+    ----------
+    model : Model
+        The model with its linear part calibrated (sensor masses come from the file).
+    data : SteppedSineData
+        A stepped-sine measurement file (read with ``read_measurement``).
+    settings : CalibrationSettings, optional
+    executor : concurrent.futures.Executor, optional
+        Runs the Latin hypercube evaluations (a process pool, or a Dask client's executor).
+    progress : callable, optional
+        ``progress(stage, info)`` for command lines and GUIs.
+    """
+    st = settings or CalibrationSettings()
+    cal_levels, val_level = split_levels(data, st)
+    rows = level_rows(data, cal_levels)
+    space = ParameterSpace.from_model(model, st.parameters)
+    predictor = SteppedSinePredictor(
+        model, data, channels=st.channels, n_harmonics=st.n_harmonics, n_time=st.n_time
+    )
+    mask = np.zeros((data.n_steps, len(predictor.channel_indices)), bool)
+    mask[rows] = True
+    objective = FRFObjective(predictor, space, mask, st.weighting)
+    spec = ObjectiveSpec(
+        model.to_toml(),
+        str(data.path),
+        space.names,
+        mask,
+        st.weighting,
+        st.channels,
+        st.n_harmonics,
+        st.n_time,
+    )
+    dists = dict(st.distributions or {})
+    if not dists and set(st.parameters) <= {"k_c", "gap", "v_c"}:
+        gap_nominal = model.parameters["gap"].nominal if "gap" in model.parameters else 1e-3
+        dists = paper_distributions(gap_nominal)
+    t0 = time.perf_counter()
+    starts = latin_hypercube(dists, st.n_starts, st.seed, space.names)
+    lo_t, hi_t = space.theta_bounds()
+    thetas = np.clip(space.to_theta(starts), lo_t, hi_t)
+    costs = evaluate_costs(spec, thetas, executor, objective)
+    lhs_s = time.perf_counter() - t0
+    if not np.isfinite(costs).any():
+        raise RuntimeError("no Latin hypercube start gave a converged model response")
+    order = np.argsort(costs)
+    if progress:
+        progress("lhs", {"n": len(costs), "best_cost": float(costs[order[0]]), "seconds": lhs_s})
+    t0 = time.perf_counter()
+    best: LeastSquaresResult | None = None
+    for k in order[: st.n_lm_starts]:
+        res = least_squares_lm(
+            objective,
+            thetas[k],
+            bounds=(lo_t, hi_t),
+            max_iterations=st.max_iterations,
+            callback=(lambda h: progress("lm", h)) if progress else None,
+        )
+        if best is None or res.cost < best.cost:
+            best = res
+    lm_s = time.perf_counter() - t0
+    m, n = best.fun.size, space.size
+    dof = max(m - n, 1)
+    chi2 = 2 * best.cost / dof
+    D = np.diag(space.dp_dtheta(best.x))
+    cov = D @ best.cov @ D
+    if objective.weighting == "identity":
+        cov = cov * chi2
+    p = space.to_physical(best.x)
+    log.info("calibrated %s (chi2/dof %.3g)", space.as_dict(p), chi2)
+    return NonlinearCalibration(
+        parameters=space.as_dict(p),
+        cov=cov,
+        chi2_per_dof=float(chi2),
+        n_residuals=m,
+        starts=starts,
+        start_costs=costs,
+        lm=best,
+        space=space,
+        settings=st,
+        calibration_levels_n=cal_levels,
+        validation_level_n=val_level,
+        timings={"lhs_s": lhs_s, "lm_s": lm_s},
+    )

@@ -1,0 +1,108 @@
+"""The nonlinear calibration metric of the paper (eq. 9-11).
+
+``delta = eps^H W eps`` with ``eps`` the stacked real and imaginary parts of the differences
+between analytical and measured multi-harmonic FRFs of the selected steps, channels and orders.
+By default ``W`` comes from the file's phasor uncertainties (each real and imaginary part divided
+by its standard error, ``sigma / sqrt(2)`` of the complex one, so ``delta`` is a chi-square); ``weighting="identity"`` is the paper's
+``W = I``.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from analysis.calibration.parameters import ParameterSpace
+from analysis.predict import SteppedSinePredictor
+
+__all__ = ["FRFObjective"]
+
+log = logging.getLogger(__name__)
+
+
+class FRFObjective:
+    """Residuals and Jacobian of the FRF metric in scaled parameter coordinates.
+
+    Parameters
+    ----------
+    predictor : SteppedSinePredictor
+    space : ParameterSpace
+    mask : ndarray of bool, shape (n_steps, n_channels), optional
+        Which (step, channel) FRFs enter (default: all); every order of a selected FRF enters.
+    weighting : {"uncertainty", "identity"}
+    """
+
+    def __init__(
+        self,
+        predictor: SteppedSinePredictor,
+        space: ParameterSpace,
+        mask: np.ndarray | None = None,
+        weighting: str = "uncertainty",
+    ) -> None:
+        if weighting not in ("uncertainty", "identity"):
+            raise ValueError(f"weighting: expected 'uncertainty' or 'identity', got {weighting!r}")
+        self.predictor, self.space = predictor, space
+        H, std = predictor.measured()
+        n, C, _ = H.shape
+        m = np.ones((n, C), bool) if mask is None else np.asarray(mask, bool)
+        if m.shape != (n, C):
+            raise ValueError(f"mask: expected shape {(n, C)}, got {m.shape}")
+        m = m & np.all(np.isfinite(H), axis=2)
+        if not m.any():
+            raise ValueError("the selection contains no measured FRF")
+        self.mask = m
+        self.rows = np.flatnonzero(m.any(axis=1))
+        self.H = H
+        if weighting == "uncertainty" and np.nanmax(std) == 0:
+            log.warning("the file has no phasor uncertainties: using identity weighting")
+            weighting = "identity"
+        if weighting == "identity":
+            self.sigma = np.ones_like(std)
+        else:
+            positive = std[np.isfinite(std) & (std > 0)]
+            self.sigma = np.maximum(np.nan_to_num(std, nan=positive.max()), positive.min())
+        self.weighting = weighting
+        self.n_evaluations = 0
+
+    @property
+    def n_residuals(self) -> int:
+        return 2 * int(self.mask.sum()) * self.H.shape[2]
+
+    def _stack(self, z: np.ndarray) -> np.ndarray:
+        # sigma is the complex standard error; each of the real and imaginary parts has
+        # sigma / sqrt(2) (measurement-file contract), so r is a unit-variance residual
+        e = (z * np.sqrt(2) / self.sigma)[self.mask].ravel()
+        return np.concatenate([e.real, e.imag])
+
+    def __call__(self, theta: np.ndarray, want_jac: bool = True):
+        """Residuals (m,) and Jacobian (m, n) at scaled coordinates ``theta``.
+
+        Residuals are NaN where a step of the selection did not converge (an infeasible point
+        for the optimiser), and for parameter values the elements refuse (e.g. a negative gap).
+        """
+        self.n_evaluations += 1
+        sp = self.space
+        p = sp.to_physical(theta)
+        try:
+            pred = self.predictor.predict(
+                sp.as_dict(p), sp.names if want_jac else (), rows=self.rows
+            )
+        except ValueError as exc:
+            log.debug("infeasible parameters %s: %s", p, exc)
+            return np.full(self.n_residuals, np.nan), None
+        if not pred.converged[self.rows].all():
+            return np.full(self.n_residuals, np.nan), None
+        r = self._stack(pred.frf - self.H)
+        if not want_jac:
+            return r, None
+        scale = sp.dp_dtheta(theta)
+        J = np.column_stack(
+            [self._stack(pred.d_frf[name]) * scale[i] for i, name in enumerate(sp.names)]
+        )
+        return r, J
+
+    def cost(self, theta: np.ndarray) -> float:
+        """``delta / 2`` at ``theta`` (``inf`` where infeasible)."""
+        r, _ = self(theta, False)
+        return 0.5 * float(r @ r) if np.all(np.isfinite(r)) else np.inf

@@ -1,0 +1,221 @@
+"""Model predictions of a stepped-sine measurement file.
+
+The analytical multi-harmonic FRFs are computed as the paper prescribes: the model is driven by
+the *measured* force phasors of every step, in the measured order of the steps (each sweep warm-
+starts from its previous step, so a jump happens where the test's would), at the realised
+frequencies; the model's response is taken in each channel's quantity (acceleration phasors are
+``-(k w)^2`` times displacement phasors) and divided by the measured force, like the measured FRF.
+Sensor masses from the file's channel table are part of the model.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from analysis.measurement_file import SteppedSineData
+from analysis.mhb.sensitivity import point_sensitivities
+from analysis.mhb.sweep import solve_steps
+from analysis.model import Model
+from analysis.system import (
+    DEFAULT_HARMONICS,
+    DEFAULT_TIME_SAMPLES,
+    build_linear,
+    build_problem_dofs,
+)
+
+__all__ = ["Prediction", "SteppedSinePredictor", "sweeps_of"]
+
+_POWER = {"displacement": 0, "velocity": 1, "acceleration": 2}
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Model FRFs of the file's steps.
+
+    Attributes
+    ----------
+    frf : ndarray, shape (n_steps, n_channels, n_orders), complex
+        Model response per unit measured force, in each channel's unit per N.
+    d_frf : dict name -> ndarray of the same shape
+        Derivatives with respect to the requested parameters.
+    converged : ndarray of bool, shape (n_steps,)
+    messages : list of str
+        Why unconverged steps failed.
+    """
+
+    frf: np.ndarray
+    d_frf: dict[str, np.ndarray]
+    converged: np.ndarray
+    messages: list[str]
+
+
+def sweeps_of(data: SteppedSineData) -> list[np.ndarray]:
+    """Row indices of each sweep: consecutive steps at one level in one direction."""
+    if data.n_steps == 0:
+        return []
+    key = np.stack([data.level_index, data.sweep_direction])
+    breaks = np.flatnonzero(np.any(key[:, 1:] != key[:, :-1], axis=0)) + 1
+    return [r for r in np.split(np.arange(data.n_steps), breaks) if r.size]
+
+
+class SteppedSinePredictor:
+    """Predicts the FRFs of a stepped-sine file from a model.
+
+    Parameters
+    ----------
+    model : Model
+        Without sensor masses: those of the file's channel table are added here.
+    data : SteppedSineData
+    channels : sequence of str, optional
+        Response channels compared (default: every acceleration/velocity/displacement channel
+        that is not the drive force).
+    n_harmonics, n_time, f_max_hz
+        Balance settings (defaults: the validated analysis defaults).
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        data: SteppedSineData,
+        *,
+        channels: Sequence[str] | None = None,
+        n_harmonics: int = DEFAULT_HARMONICS,
+        n_time: int = DEFAULT_TIME_SAMPLES,
+        f_max_hz: float = 2000.0,
+    ) -> None:
+        self.data = data
+        self.settings = {"n_harmonics": n_harmonics, "n_time": n_time, "f_max_hz": f_max_hz}
+        masses: dict[int, float] = {}
+        for ch in data.channels:
+            if ch.mass_kg > 0:
+                if ch.point not in model.points:
+                    raise ValueError(
+                        f"{data.path}: channel {ch.name!r} sits at point {ch.point}, which the "
+                        f"model does not have (model points: {sorted(model.points)})"
+                    )
+                masses[ch.point] = masses.get(ch.point, 0.0) + ch.mass_kg
+        self.model = model.add_masses(masses) if masses else model
+        if channels is None:
+            idx = [
+                i
+                for i, ch in enumerate(data.channels)
+                if ch.quantity in _POWER and ch.role != "drive-force"
+            ]
+        else:
+            idx = [data.channel_index(c) for c in channels]
+        if not idx:
+            raise ValueError(f"{data.path}: no response channel to compare")
+        self.channel_indices = idx
+        self.channel_names = [data.channels[i].name for i in idx]
+        asm = self.model.assemble()
+        self._out_dofs, self._out_sign, self._power = [], [], []
+        for i in idx:
+            ch = data.channels[i]
+            if ch.quantity not in _POWER:
+                raise ValueError(f"channel {ch.name!r}: quantity {ch.quantity!r} is not a motion")
+            self._out_dofs.append(self._dof(asm, ch.point, ch.direction, ch.name))
+            self._out_sign.append(-1.0 if ch.direction.startswith("-") else 1.0)
+            self._power.append(_POWER[ch.quantity])
+        act = data.actuator
+        self._force_dof = self._dof(asm, act.point, act.direction, "actuator")
+        self._force_sign = -1.0 if act.direction.startswith("-") else 1.0
+        self.orders = data.orders
+        self._linear_key = None
+        self._linear = None
+
+    def _dof(self, asm, point: int, direction: str, what: str) -> int:
+        if point not in self.model.points:
+            raise ValueError(f"{self.data.path}: {what} at point {point}, unknown to the model")
+        node = self.model.points[point].node
+        return asm.dof_index(node, direction.lstrip("-"))
+
+    # ----------------------------------------------------------------------------------
+    def measured(self) -> tuple[np.ndarray, np.ndarray]:
+        """Measured FRFs and their standard errors, each shape (n_steps, n_channels, n_orders).
+
+        ``std = |H| sqrt((s_R/|R|)^2 + (s_F/|F|)^2)`` (first order in the phasor errors).
+        """
+        d = self.data
+        R = d.response[:, self.channel_indices, :]
+        sR = d.response_std[:, self.channel_indices, :]
+        F = d.force[:, None, :]
+        sF = d.force_std[:, None, :]
+        H = R / F
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel = np.sqrt(
+                np.nan_to_num((sR / np.abs(R)) ** 2) + np.nan_to_num((sF / np.abs(F)) ** 2)
+            )
+        return H, np.abs(H) * rel
+
+    def _linear_model(self, model: Model):
+        key = tuple(
+            sorted(
+                (n, v) for n, v in model.values().items() if model.parameters[n].group == "linear"
+            )
+        )
+        if key != self._linear_key:
+            self._linear = build_linear(model, f_max_hz=self.settings["f_max_hz"])
+            self._linear_key = key
+        return self._linear
+
+    def predict(
+        self,
+        values: Mapping[str, float] | None = None,
+        params: Sequence[str] = (),
+        rows: np.ndarray | None = None,
+    ) -> Prediction:
+        """Model FRFs (and derivatives) at parameter ``values`` for the file's steps.
+
+        Parameters
+        ----------
+        values : mapping, optional
+            Parameter values replacing the model's.
+        params : sequence of str
+            Parameters to differentiate with respect to.
+        rows : ndarray of int, optional
+            Only these steps (each sweep still solved in order up to its last needed step).
+        """
+        model = self.model.with_values(values) if values else self.model
+        lin = self._linear_model(model)
+        pb = build_problem_dofs(
+            model,
+            [self._force_dof],
+            self._out_dofs,
+            orders=self.orders,
+            n_harmonics=self.settings["n_harmonics"],
+            n_time=self.settings["n_time"],
+            linear=lin,
+        )
+        d = self.data
+        n, C, H = d.n_steps, len(self.channel_indices), len(self.orders)
+        frf = np.full((n, C, H), np.nan + 0j)
+        dfrf = {p: np.full((n, C, H), np.nan + 0j) for p in params}
+        conv = np.zeros(n, dtype=bool)
+        msgs: list[str] = []
+        need = np.ones(n, bool) if rows is None else np.isin(np.arange(n), rows)
+        orders = np.array([float(o) for o in self.orders])
+        sign = np.array(self._out_sign)[:, None]
+        power = np.array(self._power)[:, None]
+        for sweep in sweeps_of(d):
+            if not need[sweep].any():
+                continue
+            last = sweep[np.flatnonzero(need[sweep]).max()]
+            sweep = sweep[: np.flatnonzero(sweep == last)[0] + 1]
+            F = self._force_sign * d.force[sweep]
+            res = solve_steps(pb, 2 * np.pi * d.frequency_hz[sweep], F[:, :, None])
+            for j, (row, p) in enumerate(zip(sweep, res.points, strict=True)):
+                conv[row] = p.converged
+                if not p.converged:
+                    msgs.append(f"step {row} ({d.frequency_hz[row]:.3f} Hz): {p.message}")
+                    continue
+                wk = 2 * np.pi * d.frequency_hz[row] * orders  # (H,)
+                factor = sign * (1j * wk[None, :]) ** power / F[j][None, :] * self._force_sign
+                frf[row] = p.outputs().T * factor
+                if params and need[row]:
+                    sens = point_sensitivities(pb, p, list(params))
+                    for name in params:
+                        dfrf[name][row] = sens[name].d_outputs(pb.order_k).T * factor
+        return Prediction(frf, dfrf, conv, msgs)
