@@ -59,9 +59,13 @@ class FRFObjective:
             weighting = "identity"
         if weighting == "identity":
             self.sigma = np.ones_like(std)
+            self._weight = np.ones_like(std)
         else:
             positive = std[np.isfinite(std) & (std > 0)]
             self.sigma = np.maximum(np.nan_to_num(std, nan=positive.max()), positive.min())
+            # sigma is the complex standard error; each of the real and imaginary parts has
+            # sigma / sqrt(2) (measurement-file contract), so r is a unit-variance residual
+            self._weight = np.sqrt(2) / self.sigma
         self.weighting = weighting
         self.n_evaluations = 0
 
@@ -70,9 +74,7 @@ class FRFObjective:
         return 2 * int(self.mask.sum()) * self.H.shape[2]
 
     def _stack(self, z: np.ndarray) -> np.ndarray:
-        # sigma is the complex standard error; each of the real and imaginary parts has
-        # sigma / sqrt(2) (measurement-file contract), so r is a unit-variance residual
-        e = (z * np.sqrt(2) / self.sigma)[self.mask].ravel()
+        e = (z * self._weight)[self.mask].ravel()
         return np.concatenate([e.real, e.imag])
 
     def __call__(self, theta: np.ndarray, want_jac: bool = True):

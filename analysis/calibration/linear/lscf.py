@@ -1,0 +1,214 @@
+"""Starting poles for the modal identification: least-squares complex frequency (LSCF).
+
+A common-denominator rational model in the z-domain, ``H_o = N_o(z) / D(z)`` with real
+polynomial coefficients and ``z = exp(-i omega T)``, is fitted to all channels at once in the
+linearised sense; the numerators are eliminated from the normal equations, so only the small
+reduced matrix of the denominator is solved. The poles are computed for a range of model
+orders and those that persist (a stabilisation diagram read automatically) are returned.
+
+References
+----------
+P. Guillaume, P. Verboven, S. Vanlanduit, H. Van der Auweraer, B. Peeters, "A poly-reference
+implementation of the least-squares complex frequency-domain estimator", IMAC XXI (2003).
+B. Peeters, H. Van der Auweraer, P. Guillaume, J. Leuridan, "The PolyMAX frequency-domain
+method: a new standard for modal parameter estimation?", Shock and Vibration 11 (2004) 395-409.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+
+__all__ = ["StablePole", "lscf_poles", "stable_poles", "starting_poles"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class StablePole:
+    """A pole that persists over model orders.
+
+    Attributes
+    ----------
+    frequency_hz : float
+        Undamped natural frequency ``|lambda| / 2 pi``.
+    zeta : float
+        Damping ratio ``-Re(lambda) / |lambda|``.
+    n_orders : int
+        Number of model orders at which the pole was found stable.
+    """
+
+    frequency_hz: float
+    zeta: float
+    n_orders: int
+
+    @property
+    def pole(self) -> complex:
+        """``lambda = -zeta omega + i omega sqrt(1 - zeta^2)`` [rad/s]."""
+        w = 2 * np.pi * self.frequency_hz
+        return complex(-self.zeta * w, w * np.sqrt(1 - self.zeta**2))
+
+
+def _reduced_matrices(omega: np.ndarray, H: np.ndarray, order: int, T: float) -> np.ndarray:
+    """Reduced normal matrix of the denominator, shape (order + 1, order + 1)."""
+    X = np.exp(-1j * np.outer(omega, np.arange(order + 1)) * T)  # (nf, n+1)
+    R0 = (X.conj().T @ X).real
+    cho = sla.cho_factor(R0)
+    Mred = np.zeros_like(R0)
+    for o in range(H.shape[1]):
+        h = H[:, o]
+        w2 = 1.0 / max(float(np.mean(np.abs(h) ** 2)), 1e-300)  # channels weighted equally
+        S = -(X.conj().T @ (h[:, None] * X)).real
+        Tm = (X.conj().T @ ((np.abs(h) ** 2)[:, None] * X)).real
+        Mred += w2 * (Tm - S.T @ sla.cho_solve(cho, S))
+    return Mred
+
+
+def lscf_poles(
+    frequency_hz: np.ndarray, H: np.ndarray, orders: list[int], f_max_hz: float
+) -> dict[int, np.ndarray]:
+    """Poles of LSCF models of the given orders.
+
+    Parameters
+    ----------
+    frequency_hz : ndarray, shape (nf,), Hz
+    H : ndarray, shape (nf, C), complex
+        FRFs of one input (any consistent unit per channel).
+    orders : list of int
+        Denominator orders (number of poles including conjugates).
+    f_max_hz : float
+        Sets the sampling interval of the z-domain, ``T = 1 / (2 f_max)``; above the band.
+
+    Returns
+    -------
+    dict order -> ndarray of complex, rad/s
+        All roots of each order's denominator as s-domain poles.
+    """
+    omega = 2 * np.pi * np.asarray(frequency_hz, dtype=float)
+    T = 1.0 / (2.0 * f_max_hz)
+    n_max = max(orders)
+    M_full = _reduced_matrices(omega, np.asarray(H), n_max, T)
+    out = {}
+    for n in orders:
+        M = M_full[: n + 1, : n + 1]
+        try:
+            a = np.linalg.solve(M[:n, :n], -M[:n, n])
+        except np.linalg.LinAlgError:
+            a = np.linalg.lstsq(M[:n, :n], -M[:n, n], rcond=None)[0]
+        coeffs = np.append(a, 1.0)  # ascending powers of z
+        roots = np.roots(coeffs[::-1])
+        roots = roots[np.isfinite(roots) & (np.abs(roots) > 0)]
+        out[n] = -np.log(roots.astype(complex)) / T
+    return out
+
+
+def _physical(poles: np.ndarray, band: tuple[float, float], zeta_max: float) -> np.ndarray:
+    """(frequency_hz, zeta) rows of upper-half-plane poles in the band with 0 < zeta < max."""
+    p = poles[poles.imag > 0]
+    f = np.abs(p) / (2 * np.pi)
+    z = -p.real / np.abs(p)
+    keep = (f >= band[0]) & (f <= band[1]) & (z > 0) & (z < zeta_max)
+    rows = np.column_stack([f[keep], z[keep]])
+    return rows[np.argsort(rows[:, 0])]
+
+
+def stable_poles(
+    frequency_hz: np.ndarray,
+    H: np.ndarray,
+    band_hz: tuple[float, float],
+    *,
+    max_order: int = 48,
+    zeta_max: float = 0.2,
+    tol_frequency: float = 0.005,
+    tol_zeta: float = 0.1,
+    min_fraction: float = 0.3,
+) -> list[StablePole]:
+    """Poles stable over LSCF model orders 4, 6, ..., ``max_order``.
+
+    A pole at order ``n`` is stable when order ``n - 2`` has one within ``tol_frequency``
+    (relative) in frequency and ``tol_zeta`` (relative) in damping. Stable poles are grouped
+    by frequency (gaps above ``tol_frequency``); a group found at no fewer than
+    ``min_fraction`` of the orders (and at least 3) gives one pole, the median of the group.
+
+    Parameters
+    ----------
+    frequency_hz : ndarray, shape (nf,), Hz
+    H : ndarray, shape (nf, C), complex
+    band_hz : (float, float)
+        Only poles with natural frequency inside are kept.
+
+    Returns
+    -------
+    list of StablePole, ascending frequency
+    """
+    orders = list(range(4, max_order + 1, 2))
+    f_max = float(np.max(frequency_hz)) * 1.05
+    poles = lscf_poles(frequency_hz, H, orders, f_max)
+    stable: list[tuple[float, float]] = []
+    prev = np.zeros((0, 2))
+    for n in orders:
+        rows = _physical(poles[n], band_hz, zeta_max)
+        for f, z in rows:
+            if prev.size:
+                df = np.abs(prev[:, 0] - f) / f
+                dz = np.abs(prev[:, 1] - z) / z
+                if np.any((df < tol_frequency) & (dz < tol_zeta)):
+                    stable.append((f, z))
+        prev = rows
+    if not stable:
+        return []
+    arr = np.array(sorted(stable))
+    groups = np.split(arr, np.flatnonzero(np.diff(arr[:, 0]) / arr[1:, 0] > tol_frequency) + 1)
+    need = max(3, int(np.ceil(min_fraction * len(orders))))
+    out = [
+        StablePole(float(np.median(g[:, 0])), float(np.median(g[:, 1])), len(g))
+        for g in groups
+        if len(g) >= need
+    ]
+    log.debug("LSCF: %d stable poles from orders %d..%d", len(out), orders[0], orders[-1])
+    return out
+
+
+def starting_poles(
+    frequency_hz: np.ndarray,
+    H: np.ndarray,
+    band_hz: tuple[float, float],
+    *,
+    max_order: int = 32,
+    zeta_max: float = 0.2,
+) -> list[StablePole]:
+    """Stable poles over a wide band, found sub-band by sub-band.
+
+    One z-domain model over a band of several decades resolves its low modes poorly (they
+    crowd near ``z = 1``). The band is cut at ``f_lo * 2^k``; sub-band ``k`` spans
+    ``[e_(k-1), e_(k+2)]`` (three octaves) and contributes the stable poles of its middle
+    octave ``[e_k, e_(k+1)]``.
+
+    Parameters
+    ----------
+    frequency_hz : ndarray, shape (nf,), Hz
+    H : ndarray, shape (nf, C), complex
+    band_hz : (float, float)
+
+    Returns
+    -------
+    list of StablePole, ascending frequency
+    """
+    f = np.asarray(frequency_hz, dtype=float)
+    lo, hi = band_hz
+    n_oct = max(1, int(np.ceil(np.log2(hi / lo))))
+    edges = lo * 2.0 ** np.arange(n_oct + 1)
+    edges[-1] = hi
+    out: list[StablePole] = []
+    for k in range(n_oct):
+        a, b = edges[max(k - 1, 0)], edges[min(k + 2, n_oct)]
+        m = (f >= a) & (f <= b)
+        if np.count_nonzero(m) < 8:
+            continue
+        core = (edges[k], edges[k + 1])
+        found = stable_poles(f[m], H[m], core, max_order=max_order, zeta_max=zeta_max)
+        out += [p for p in found if not out or p.frequency_hz > out[-1].frequency_hz]
+    return out

@@ -1,0 +1,145 @@
+"""Nonlinear calibration on seeded synthetic runs with known parameters (ground truth)."""
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from analysis.calibration.crossval import cross_validate
+from analysis.calibration.lhs import Distribution, latin_hypercube, paper_distributions
+from analysis.calibration.lm import least_squares_lm
+from analysis.calibration.nonlinear import CalibrationSettings, calibrate_nonlinear
+from analysis.calibration.objective import FRFObjective
+from analysis.calibration.parameters import ParameterSpace
+from analysis.calibration.validation import validate
+from analysis.measurement_file import read_measurement
+from analysis.model import load_model
+from analysis.predict import SteppedSinePredictor
+
+from ..synthetic_runs import write_synthetic_run
+
+LINEAR = {"E_frame": 205e9, "E_corner": 128e9, "E_beam": 201e9, "rho_corner": 5175.0,
+          "k_mount": 57989.0}
+TRUTH = {"k_c": 4.51e5, "gap": 0.60e-3, "v_c": 25.21}
+FREQS = np.unique(np.round(np.concatenate([np.arange(22, 33, 1.0),
+                                           np.arange(250, 281, 2) / 10.0]), 6))
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    path = tmp_path_factory.mktemp("cal") / "synthetic.h5"
+    truth = load_model().with_values({**LINEAR, **TRUTH})
+    write_synthetic_run(path, truth, frequencies_hz=FREQS, seed=3)
+    return load_model().with_values(LINEAR), read_measurement(path)
+
+
+@pytest.fixture(scope="module")
+def calibrated(run):
+    model, data = run
+    st = CalibrationSettings(n_starts=12, seed=1)
+    return calibrate_nonlinear(model, data, st)
+
+
+def test_calibration_recovers_the_truth(calibrated):
+    """Gap within 1 %, k_c and v within 5 % (the acceptance of the method)."""
+    p = calibrated.parameters
+    assert abs(p["gap"] / TRUTH["gap"] - 1) < 0.01
+    assert abs(p["k_c"] / TRUTH["k_c"] - 1) < 0.05
+    assert abs(p["v_c"] / TRUTH["v_c"] - 1) < 0.05
+    # weighted by the file's uncertainties, the residual is consistent with the noise
+    assert 0.7 < calibrated.chi2_per_dof < 1.5
+    assert calibrated.lm.success
+    assert calibrated.lm.history[-1]["cost"] < calibrated.lm.history[0]["cost"]
+    assert calibrated.validation_level_n == 8.0
+    assert calibrated.calibration_levels_n == (2.0, 4.0, 6.0)
+
+
+def test_cross_validation_scatter_matches_the_fisher_information(run, calibrated):
+    model, data = run
+    cv = cross_validate(model, data, calibrated)
+    assert len(cv.folds) == 9  # 3 sensors x 3 levels
+    assert np.all(cv.std_ratio > 0.4) and np.all(cv.std_ratio < 2.5)
+    assert np.allclose(cv.mean, list(calibrated.parameters.values()), rtol=1e-2)
+
+
+def test_validation_at_the_held_out_level_passes(run, calibrated):
+    model, data = run
+    v = validate(model, data, calibrated)
+    assert v.passed and v.level_n == 8.0
+    assert v.within_2sigma > 0.85
+    # a wrong model fails the same validation
+    wrong = calibrated.__class__(**{**calibrated.__dict__,
+                                    "parameters": {**calibrated.parameters, "gap": 0.8e-3}})
+    assert not validate(model, data, wrong).passed
+
+
+def test_objective_jacobian_matches_finite_differences(run):
+    model, data = run
+    pred = SteppedSinePredictor(model, data)
+    space = ParameterSpace.from_model(model, ["k_c", "gap", "v_c"])
+    rows = np.isin(data.level_index, [0, 1])
+    mask = np.repeat(rows[:, None], len(pred.channel_indices), axis=1)
+    obj = FRFObjective(pred, space, mask)
+    theta = space.to_theta(np.array([5e5, 0.62e-3, 20.0]))
+    r0, J = obj(theta)
+    for j, h in enumerate((1e-5, 1e-6, 1e-5)):
+        e = np.zeros(3)
+        e[j] = h
+        fd = (obj(theta + e, False)[0] - obj(theta - e, False)[0]) / (2 * h)
+        assert np.abs(J[:, j] - fd).max() <= 2e-3 * np.abs(fd).max()
+
+
+def test_identity_weighting_is_the_papers_metric(run):
+    model, data = run
+    pred = SteppedSinePredictor(model, data)
+    space = ParameterSpace.from_model(model, ["k_c"])
+    obj = FRFObjective(pred, space, weighting="identity")
+    H, _ = pred.measured()
+    theta = space.to_theta(np.array([TRUTH["k_c"]]))
+    r, _ = obj(theta, False)
+    p = pred.predict({"k_c": TRUTH["k_c"]})
+    eps = (p.frf - H).ravel()
+    assert np.isclose(r @ r, np.vdot(eps, eps).real, rtol=1e-12)
+
+
+def test_lm_matches_scipy_on_a_smooth_problem():
+    t = np.linspace(0, 3, 40)
+    y = 2.5 * np.exp(-1.3 * t) + 0.3
+
+    def fun(x, want):
+        r = x[0] * np.exp(-x[1] * t) + x[2] - y
+        J = np.column_stack([np.exp(-x[1] * t), -x[0] * t * np.exp(-x[1] * t), np.ones_like(t)])
+        return r, (J if want else None)
+
+    ours = least_squares_lm(fun, np.array([1.0, 0.5, 0.0]))
+    ref = least_squares(lambda x: fun(x, False)[0], [1.0, 0.5, 0.0], method="lm")
+    assert ours.success
+    assert np.allclose(ours.x, ref.x, rtol=1e-6)
+    gn = least_squares_lm(fun, np.array([2.0, 1.0, 0.2]), damped=False)
+    assert np.allclose(gn.x, [2.5, 1.3, 0.3], rtol=1e-6)
+
+
+def test_latin_hypercube_follows_the_papers_distributions():
+    d = paper_distributions(1e-3)
+    s = latin_hypercube(d, 2000, seed=4, names=["k_c", "gap", "v_c"])
+    assert s[:, 0].min() >= 1e5 and s[:, 0].max() <= 1e7
+    assert abs(s[:, 1].mean() / 1e-3 - 1) < 0.01
+    assert abs(s[:, 1].std() / 0.5e-3 - 1) < 0.03
+    assert s[:, 2].min() >= 1 and s[:, 2].max() <= 100
+    # one sample per stratum in every dimension
+    n = 2000
+    for j in range(3):
+        u = np.sort(np.argsort(np.argsort(s[:, j])))
+        assert np.array_equal(u, np.arange(n))
+    with pytest.raises(ValueError, match="std must be below"):
+        Distribution("beta", 1.0, 1.5)
+
+
+def test_parameter_space_round_trip_and_bounds():
+    model = load_model()
+    sp = ParameterSpace.from_model(model, ["k_c", "gap"])
+    p = np.array([3e5, 0.7e-3])
+    assert np.allclose(sp.to_physical(sp.to_theta(p)), p)
+    lo, hi = sp.theta_bounds()
+    assert np.all(lo < sp.to_theta(p)) and np.all(sp.to_theta(p) < hi)
+    with pytest.raises(ValueError, match="unknown parameter"):
+        ParameterSpace.from_model(model, ["k_cc"])
