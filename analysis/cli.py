@@ -6,6 +6,10 @@ modes            natural frequencies of a model and the beam's share of each mod
 sweep            stepped multi-harmonic FRFs by MHB (the paper's frequency plan by default)
 continuation     a branch through its folds with Hill stability
 export-matrices  write M and K of a model (npz, mtx or mat) with its DOF map
+calibrate        nonlinear calibration of a stepped-sine run (LHS + Levenberg-Marquardt)
+crossval         k-fold cross-validation of a calibration
+validate         prediction of a held-out level with uncertainty bands, pass/fail
+report           one report (HTML + Markdown) from a calibration folder
 demo             the analysis part of the paper on the published model (figures + summary)
 """
 
@@ -302,6 +306,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--format", choices=["npz", "mtx", "mat"], default=None)
     sp.set_defaults(func=cmd_export)
 
+    from analysis.calibration.cli import add_parsers as add_calibration
+
+    add_calibration(sub)
+
     sp = sub.add_parser("demo", help="the analysis part of the paper on its published model")
     common(sp, model=False)
     sp.add_argument("--out", default="demo-output", help="output folder")
@@ -317,7 +325,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     try:
         result = args.func(args)
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, RuntimeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if args.json:

@@ -3,8 +3,8 @@
 ``delta = eps^H W eps`` with ``eps`` the stacked real and imaginary parts of the differences
 between analytical and measured multi-harmonic FRFs of the selected steps, channels and orders.
 By default ``W`` comes from the file's phasor uncertainties (each real and imaginary part divided
-by its standard error, ``sigma / sqrt(2)`` of the complex one, so ``delta`` is a chi-square); ``weighting="identity"`` is the paper's
-``W = I``.
+by its standard error, ``sigma / sqrt(2)`` of the complex one, so ``delta`` is a chi-square);
+``weighting="identity"`` is the paper's ``W = I``.
 """
 
 from __future__ import annotations

@@ -17,11 +17,17 @@ from analysis.predict import SteppedSinePredictor
 
 from ..synthetic_runs import write_synthetic_run
 
-LINEAR = {"E_frame": 205e9, "E_corner": 128e9, "E_beam": 201e9, "rho_corner": 5175.0,
-          "k_mount": 57989.0}
+LINEAR = {
+    "E_frame": 205e9,
+    "E_corner": 128e9,
+    "E_beam": 201e9,
+    "rho_corner": 5175.0,
+    "k_mount": 57989.0,
+}
 TRUTH = {"k_c": 4.51e5, "gap": 0.60e-3, "v_c": 25.21}
-FREQS = np.unique(np.round(np.concatenate([np.arange(22, 33, 1.0),
-                                           np.arange(250, 281, 2) / 10.0]), 6))
+FREQS = np.unique(
+    np.round(np.concatenate([np.arange(22, 33, 1.0), np.arange(250, 281, 2) / 10.0]), 6)
+)
 
 
 @pytest.fixture(scope="module")
@@ -67,8 +73,9 @@ def test_validation_at_the_held_out_level_passes(run, calibrated):
     assert v.passed and v.level_n == 8.0
     assert v.within_2sigma > 0.85
     # a wrong model fails the same validation
-    wrong = calibrated.__class__(**{**calibrated.__dict__,
-                                    "parameters": {**calibrated.parameters, "gap": 0.8e-3}})
+    wrong = calibrated.__class__(
+        **{**calibrated.__dict__, "parameters": {**calibrated.parameters, "gap": 0.8e-3}}
+    )
     assert not validate(model, data, wrong).passed
 
 
@@ -143,3 +150,62 @@ def test_parameter_space_round_trip_and_bounds():
     assert np.all(lo < sp.to_theta(p)) and np.all(sp.to_theta(p) < hi)
     with pytest.raises(ValueError, match="unknown parameter"):
         ParameterSpace.from_model(model, ["k_cc"])
+
+
+def test_command_chain_writes_model_results_and_report(run, tmp_path):
+    """calibrate -> crossval -> validate -> report, as a user runs them (subprocesses)."""
+    import json
+    import subprocess
+    import sys
+
+    _, data = run
+    out = tmp_path / "cal"
+    sets = [a for k, v in LINEAR.items() for a in ("--set", f"{k}={v}")]
+
+    def run_cli(*args):
+        r = subprocess.run(
+            [sys.executable, "-m", "analysis", *args, "--json"],
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert r.returncode == 0, r.stderr
+        return json.loads(r.stdout.strip().splitlines()[-1])
+
+    cal = run_cli(
+        "calibrate",
+        str(data.path),
+        *sets,
+        "--out",
+        str(out),
+        "--starts",
+        "12",
+        "--seed",
+        "1",
+        "--workers",
+        "1",
+    )
+    assert abs(cal["parameters"]["gap"] / TRUTH["gap"] - 1) < 0.01
+    run_cli("crossval", "--result", str(out / "calibration.json"), "--workers", "1")
+    val = run_cli("validate", "--result", str(out / "calibration.json"))
+    assert val["passed"]
+    run_cli("report", str(out))
+    for name in (
+        "calibrated_model.toml",
+        "calibration.json",
+        "crossval.json",
+        "validation.json",
+        "report.html",
+        "calibration_fit.png",
+        "validation.png",
+        "crossval.png",
+    ):
+        assert (out / name).exists(), name
+    # the calibrated model file holds the calibrated values, the input model is untouched
+    from analysis.model import load_model as _load
+
+    m = _load(out / "calibrated_model.toml")
+    assert np.isclose(m.values()["gap"], cal["parameters"]["gap"])
+    assert m.parameters["gap"].nominal == load_model().parameters["gap"].nominal
+    report = (out / "report.html").read_text()
+    assert "Validation" in report and "PASS" in report

@@ -1,0 +1,227 @@
+"""Command-line commands of the nonlinear calibration: calibrate, crossval, validate, report.
+
+Each command reads files and writes files into an output folder, so they chain:
+``calibrate RUN.h5 --out R``; ``crossval --result R/calibration.json``;
+``validate --result R/calibration.json``; ``report R``.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+from analysis.calibration.crossval import cross_validate
+from analysis.calibration.nonlinear import CalibrationSettings, calibrate_nonlinear, level_rows
+from analysis.calibration.results import load_calibration, save_calibration
+from analysis.calibration.validation import validate
+from analysis.executors import make_executor
+from analysis.measurement_file import SteppedSineData, read_measurement
+from analysis.model import load_model
+from analysis.predict import SteppedSinePredictor
+
+__all__ = ["add_parsers"]
+
+
+def _progress(quiet: bool):
+    state = {"t0": time.perf_counter()}
+
+    def show(stage: str, info: dict) -> None:
+        if quiet:
+            return
+        t = time.perf_counter() - state["t0"]
+        if stage == "lhs":
+            print(
+                f"[{t:6.1f} s] {info['n']} Latin hypercube starts evaluated; best metric "
+                f"{info['best_cost']:.4g}",
+                file=sys.stderr,
+            )
+        elif stage == "lm":
+            print(
+                f"[{t:6.1f} s] LM iteration {info['iteration']}: metric {info['cost']:.6g}",
+                file=sys.stderr,
+            )
+
+    return show
+
+
+def _stepped(path: str) -> SteppedSineData:
+    data = read_measurement(path)
+    if not isinstance(data, SteppedSineData):
+        raise ValueError(
+            f"{path}: a stepped-sine run is needed (this file is kind {data.kind!r})"
+            if hasattr(data, "kind")
+            else f"{path}: not a stepped-sine run"
+        )
+    return data
+
+
+def _fit_figure(model, data, params, st, out: Path, levels, name: str, title: str):
+    from analysis.report import plot_measured_vs_model
+
+    pred = SteppedSinePredictor(
+        model, data, channels=st.channels, n_harmonics=st.n_harmonics, n_time=st.n_time
+    )
+    H, _ = pred.measured()
+    rows = level_rows(data, levels)
+    p = pred.predict(params, rows=rows)
+    curves = {}
+    for lv in levels:
+        r = level_rows(data, [lv])
+        curves[f"{lv:g} N"] = (data.frequency_hz[r], H[r], p.frf[r])
+    return plot_measured_vs_model(
+        curves, pred.channel_names, [str(o) for o in data.orders], out / name, title=title
+    )
+
+
+def cmd_calibrate(args) -> dict:
+    from analysis.report import plot_convergence
+
+    model = load_model(args.model)
+    if args.set:
+        model = model.with_values({k: float(v) for k, v in (s.split("=", 1) for s in args.set)})
+    data = _stepped(args.run)
+    st = CalibrationSettings(
+        n_starts=args.starts,
+        seed=args.seed,
+        weighting="identity" if args.identity else "uncertainty",
+        max_iterations=args.max_iterations,
+    )
+    out = Path(args.out)
+    t0 = time.perf_counter()
+    with make_executor(args.workers, args.scheduler) as ex:
+        res = calibrate_nonlinear(model, data, st, executor=ex, progress=_progress(args.json))
+    files = save_calibration(res, model, out, args.run)
+    fig1 = plot_convergence([h["cost"] for h in res.lm.history], out / "convergence.png")
+    fig2 = _fit_figure(
+        model,
+        data,
+        res.parameters,
+        st,
+        out,
+        res.calibration_levels_n,
+        "calibration_fit.png",
+        "Calibration levels: measured vs calibrated model",
+    )
+    summary = {
+        "parameters": res.parameters,
+        "std": res.std,
+        "chi2_per_dof": res.chi2_per_dof,
+        "lm_iterations": res.lm.nit,
+        "timings": res.timings,
+        "total_s": time.perf_counter() - t0,
+        "files": [str(p) for p in (*files.values(), fig1, fig2)],
+    }
+    if not args.json:
+        print("calibrated parameters (1 sigma):")
+        for n, v in res.parameters.items():
+            print(f"  {n:10s} {v:12.5g} +- {res.std[n]:.3g}")
+        print(f"chi2/dof {res.chi2_per_dof:.3f}; LM {res.lm.nit} iterations ({res.lm.message})")
+        print(f"model: {files['model']}\nresult: {files['result']}")
+    return summary
+
+
+def cmd_crossval(args) -> dict:
+    from analysis.report import plot_crossval
+
+    res, model, data_path = load_calibration(args.result)
+    data = _stepped(args.run or data_path)
+    with make_executor(args.workers, args.scheduler) as ex:
+        cv = cross_validate(model, data, res, executor=ex)
+    out = Path(args.result).parent
+    (out / "crossval.json").write_text(json.dumps(cv.to_json(), indent=1))
+    fig = plot_crossval(
+        cv.names, cv.folds, cv.estimates, cv.mean, cv.std, cv.fim_std, out / "crossval.png"
+    )
+    if not args.json:
+        print(f"{len(cv.folds)}-fold cross-validation ({cv.seconds:.1f} s):")
+        for j, n in enumerate(cv.names):
+            print(
+                f"  {n:10s} mean {cv.mean[j]:12.5g}  std {cv.std[j]:.3g}  "
+                f"FIM^-1 std {cv.fim_std[j]:.3g}  ratio {cv.std_ratio[j]:.2f}"
+            )
+    return {**cv.to_json(), "figure": str(fig)}
+
+
+def cmd_validate(args) -> dict:
+    from analysis.report import plot_validation
+
+    res, model, data_path = load_calibration(args.result)
+    data = _stepped(args.run or data_path)
+    v = validate(model, data, res, level_n=args.level, threshold=args.threshold)
+    out = Path(args.result).parent
+    (out / "validation.json").write_text(json.dumps(v.to_json(), indent=1))
+    fig = plot_validation(
+        v.frequency_hz,
+        v.measured,
+        v.measured_std,
+        v.predicted,
+        v.predicted_std,
+        v.channels,
+        [str(o) for o in data.orders],
+        out / "validation.png",
+        title=f"Validation at {v.level_n:g} N (not used in calibration)",
+    )
+    if not args.json:
+        print(v.summary())
+    return {**v.to_json(), "figure": str(fig)}
+
+
+def cmd_report(args) -> dict:
+    from analysis.report.calibration_report import write_report
+
+    paths = write_report(Path(args.folder))
+    if not args.json:
+        print(f"report: {paths['html']}")
+    return {k: str(v) for k, v in paths.items()}
+
+
+def add_parsers(sub) -> None:
+    """Add the calibration commands to an ``argparse`` sub-parser collection."""
+    sp = sub.add_parser("calibrate", help="nonlinear calibration (LHS + Levenberg-Marquardt)")
+    sp.add_argument("run", help="stepped-sine measurement file (.h5)")
+    sp.add_argument("--model", help="model file, linear part calibrated (default: reference rig)")
+    sp.add_argument("--set", action="append", metavar="NAME=VALUE", help="override a value")
+    sp.add_argument("--out", required=True, help="output folder")
+    sp.add_argument("--starts", type=int, default=100, help="Latin hypercube starts")
+    sp.add_argument("--seed", type=int, default=0)
+    sp.add_argument(
+        "--lm-starts",
+        type=int,
+        default=1,
+        help="best Latin hypercube candidates refined by LM (the paper: 1)",
+    )
+    sp.add_argument("--max-iterations", type=int, default=50)
+    sp.add_argument(
+        "--identity", action="store_true", help="W = I (the paper) instead of 1/sigma^2"
+    )
+    sp.set_defaults(func=cmd_calibrate)
+
+    sp = sub.add_parser("crossval", help="k-fold cross-validation of a calibration")
+    sp.add_argument("--result", required=True, help="calibration.json")
+    sp.add_argument("--run", help="measurement file (default: the one calibrated)")
+    sp.set_defaults(func=cmd_crossval)
+
+    sp = sub.add_parser("validate", help="predict a held-out level with bands, pass/fail")
+    sp.add_argument("--result", required=True, help="calibration.json")
+    sp.add_argument("--run", help="measurement file (default: the one calibrated)")
+    sp.add_argument("--level", type=float, help="level [N] (default: the one held out)")
+    sp.add_argument("--threshold", type=float, default=2.0, help="largest chi2/dof that passes")
+    sp.set_defaults(func=cmd_validate)
+
+    sp = sub.add_parser("report", help="collect a folder's results into one report")
+    sp.add_argument("folder", help="folder written by calibrate/crossval/validate")
+    sp.set_defaults(func=cmd_report)
+
+    for name in ("calibrate", "crossval", "validate", "report"):
+        p = sub.choices[name]
+        p.add_argument("--json", action="store_true", help="print one JSON object")
+        if name in ("calibrate", "crossval"):
+            p.add_argument(
+                "--workers",
+                type=int,
+                default=None,
+                help="local worker processes (default: all CPUs; 1 = serial)",
+            )
+            p.add_argument("--scheduler", help="Dask scheduler address (a trusted lab cluster)")
