@@ -1,0 +1,186 @@
+"""Compare a model with a measurement and localise the misfit.
+
+Residuals ``r = (H_model - H_meas) / sigma`` (sigma: the FRF's complex standard error from the
+file) are grouped into blocks by sensor, order, level and frequency band. Each block gets a
+chi-square with two degrees of freedom per complex value (each part has half the complex
+variance) and a verdict: "consistent with the noise" when its p-value is at least
+``alpha / n_blocks`` (a family-wise level ``alpha`` over all blocks, Bonferroni), "fails here"
+otherwise, with the numbers. Neighbouring frequency steps are not independent in a
+real test (a model error is smooth in frequency), so a failing block is evidence of a model error
+while a passing one bounds it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from analysis.measurement_file import SteppedSineData
+from analysis.model import Model
+from analysis.predict import SteppedSinePredictor
+
+__all__ = ["Block", "Comparison", "compare"]
+
+
+@dataclass(frozen=True)
+class Block:
+    """One group of FRF values and its verdict."""
+
+    sensor: str
+    order: str
+    level_n: float
+    band_hz: tuple[float, float]
+    n_values: int
+    chi2_per_dof: float
+    p_value: float
+    consistent: bool
+
+    @property
+    def verdict(self) -> str:
+        word = "consistent with the noise" if self.consistent else "fails here"
+        return (
+            f"{self.sensor}, order {self.order}, {self.level_n:g} N, "
+            f"{self.band_hz[0]:g}-{self.band_hz[1]:g} Hz: {word} "
+            f"(chi2/dof {self.chi2_per_dof:.2f} over {self.n_values} values, "
+            f"p = {self.p_value:.2g})"
+        )
+
+
+@dataclass
+class Comparison:
+    """Normalised residuals of a model against a measurement, with block verdicts.
+
+    Attributes
+    ----------
+    residual : ndarray, shape (n_steps, n_channels, n_orders), complex
+        ``(H_model - H_meas) / sigma``; NaN where the model did not converge.
+    frequency_hz, level_n : ndarray, shape (n_steps,)
+    blocks : list of Block
+    """
+
+    residual: np.ndarray
+    frequency_hz: np.ndarray
+    level_n: np.ndarray
+    channels: list[str]
+    orders: list[str]
+    bands_hz: list[tuple[float, float]]
+    blocks: list[Block]
+    measured: np.ndarray
+    predicted: np.ndarray
+    alpha: float
+
+    @property
+    def chi2_per_dof(self) -> float:
+        """Whole-file chi-square per degree of freedom."""
+        z = np.abs(self.residual[np.isfinite(self.residual)]) ** 2
+        return float(z.mean()) if z.size else np.nan
+
+    @property
+    def rms_over_noise(self) -> float:
+        """Root of the chi-square per degree of freedom (1 = at the noise)."""
+        return float(np.sqrt(self.chi2_per_dof))
+
+    @property
+    def adequate(self) -> bool:
+        return all(b.consistent for b in self.blocks)
+
+    def failing(self) -> list[Block]:
+        return sorted((b for b in self.blocks if not b.consistent), key=lambda b: -b.chi2_per_dof)
+
+    def map_sensor_order_level(self) -> tuple[np.ndarray, list[float]]:
+        """chi2/dof per (sensor, order, level): shape (n_channels, n_orders, n_levels)."""
+        levels = sorted(set(self.level_n.tolist()))
+        out = np.full((len(self.channels), len(self.orders), len(levels)), np.nan)
+        for li, lv in enumerate(levels):
+            r = self.residual[self.level_n == lv]
+            z = np.abs(r) ** 2
+            with np.errstate(invalid="ignore"):
+                out[:, :, li] = np.nanmean(z, axis=0)
+        return out, levels
+
+    def summary(self, n: int = 8) -> str:
+        lines = [
+            f"chi2/dof {self.chi2_per_dof:.3g} (rms residual / noise "
+            f"{self.rms_over_noise:.3g}) over {np.isfinite(self.residual).sum()} FRF values"
+        ]
+        fails = self.failing()
+        if not fails:
+            lines.append("every block is consistent with the noise: the model is adequate here")
+        else:
+            lines.append(f"{len(fails)} of {len(self.blocks)} blocks fail; the worst:")
+            lines += ["  " + b.verdict for b in fails[:n]]
+        return "\n".join(lines)
+
+    def to_json(self) -> dict:
+        return {
+            "chi2_per_dof": self.chi2_per_dof,
+            "rms_over_noise": self.rms_over_noise,
+            "adequate": self.adequate,
+            "alpha": self.alpha,
+            "blocks": [{**b.__dict__, "verdict": b.verdict} for b in self.blocks],
+        }
+
+
+def default_bands(frequency_hz: np.ndarray, n_bands: int = 3) -> list[tuple[float, float]]:
+    """Bands with equal numbers of steps (resonance regions are sampled densely)."""
+    f = np.sort(np.unique(frequency_hz))
+    edges = np.quantile(f, np.linspace(0, 1, n_bands + 1))
+    return [(float(edges[i]), float(edges[i + 1])) for i in range(n_bands)]
+
+
+def compare(
+    model: Model,
+    data: SteppedSineData,
+    *,
+    channels: Sequence[str] | None = None,
+    bands_hz: Sequence[tuple[float, float]] | None = None,
+    alpha: float = 0.01,
+    predictor: SteppedSinePredictor | None = None,
+) -> Comparison:
+    """Normalised residuals and block verdicts of ``model`` against ``data``.
+
+    Parameters
+    ----------
+    model : Model
+    data : SteppedSineData
+    channels : sequence of str, optional
+        Response channels (default: every motion channel but the drive force).
+    bands_hz : sequence of (lo, hi), optional
+        Frequency bands of the blocks (default: three with equal numbers of steps).
+    alpha : float
+        Family-wise significance of the "fails here" verdicts (Bonferroni over the blocks).
+    """
+    pred = predictor or SteppedSinePredictor(model, data, channels=channels)
+    H, s = pred.measured()
+    p = pred.predict()
+    positive = s[np.isfinite(s) & (s > 0)]
+    floor = positive.min() if positive.size else 1.0
+    sig = np.maximum(np.nan_to_num(s, nan=floor), floor)
+    r = (p.frf - H) / sig
+    lv = data.levels_n[data.level_index]
+    bands = list(bands_hz) if bands_hz is not None else default_bands(data.frequency_hz)
+    orders = [str(o) for o in data.orders]
+    blocks = []
+    for c, ch in enumerate(pred.channel_names):
+        for k, o in enumerate(orders):
+            for level in sorted(set(lv.tolist())):
+                for lo, hi in bands:
+                    m = (lv == level) & (data.frequency_hz >= lo) & (data.frequency_hz <= hi)
+                    z = r[m, c, k]
+                    z = z[np.isfinite(z)]
+                    if z.size == 0:
+                        continue
+                    chi2 = float(2 * np.sum(np.abs(z) ** 2))
+                    dof = 2 * z.size
+                    pv = float(stats.chi2.sf(chi2, dof))
+                    blocks.append(
+                        Block(
+                            ch, o, float(level), (lo, hi), int(z.size), chi2 / dof, pv, pv >= alpha
+                        )
+                    )
+    return Comparison(
+        r, data.frequency_hz, lv, pred.channel_names, orders, bands, blocks, H, p.frf, alpha
+    )
