@@ -177,10 +177,10 @@ def compare(
                     dof = 2 * z.size
                     pv = float(stats.chi2.sf(chi2, dof))
                     blocks.append(
-                        Block(
-                            ch, o, float(level), (lo, hi), int(z.size), chi2 / dof, pv, pv >= alpha
-                        )
+                        Block(ch, o, float(level), (lo, hi), int(z.size), chi2 / dof, pv, True)
                     )
+    per_block = alpha / max(len(blocks), 1)
+    blocks = [Block(**{**b.__dict__, "consistent": b.p_value >= per_block}) for b in blocks]
     return Comparison(
         r, data.frequency_hz, lv, pred.channel_names, orders, bands, blocks, H, p.frf, alpha
     )
