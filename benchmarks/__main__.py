@@ -15,6 +15,7 @@ import sys  # noqa: E402
 
 SCENARIOS = {
     "mhb": "benchmarks.mhb",
+    "planning": "benchmarks.planning",
 }
 
 
