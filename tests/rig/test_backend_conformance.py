@@ -11,7 +11,9 @@ import weakref
 import numpy as np
 import pytest
 
+from rig.backends import open_backend
 from rig.backends.ni import NiDaqBackend
+from sim_backend.sensors import FaultSwitches
 from tests.rig.backend_conformance import CHECKS, BackendCase
 from tests.rig.nidaqmx_standin import StandinDevice, loopback
 
@@ -38,6 +40,12 @@ def _ni_stall(backend: NiDaqBackend) -> None:
 
 CASES = [
     BackendCase("ni-standin", make=_ni_with_standin, output=_ni_output, stall=_ni_stall),
+    BackendCase(
+        "sim",
+        make=lambda: open_backend("sim", record_output=True),
+        output=lambda b: b.output_samples(),
+        stall=lambda b: b.set_faults(FaultSwitches(read_timeout=True)),
+    ),
 ]
 
 
