@@ -6,6 +6,7 @@ modes            natural frequencies of a model and the beam's share of each mod
 sweep            stepped multi-harmonic FRFs by MHB (the paper's frequency plan by default)
 continuation     a branch through its folds with Hill stability
 export-matrices  write M and K of a model (npz, mtx or mat) with its DOF map
+calibrate-linear linear calibration of a random run (damping equalization)
 plan             pretest planning: rank test configurations by det(FIM)
 calibrate        nonlinear calibration of a stepped-sine run (LHS + Levenberg-Marquardt)
 crossval         k-fold cross-validation of a calibration
@@ -308,9 +309,11 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_export)
 
     from analysis.calibration.cli import add_parsers as add_calibration
+    from analysis.calibration.linear.cli import add_parser as add_linear_parser
     from analysis.planning.cli import add_parser as add_plan_parser
 
     add_plan_parser(sub)
+    add_linear_parser(sub)
     add_calibration(sub)
 
     sp = sub.add_parser("demo", help="the analysis part of the paper on its published model")

@@ -127,41 +127,47 @@ class ModalLinearModel:
         self.dK = dict(dK or {})
         self.param_names = tuple(self.dK)
         self._sens: tuple[dict, dict] | None = None
-        self._static: dict[int, np.ndarray] = {}
-
-    # -- static flexibility columns, cached by DOF
-    def _flex_columns(self, cols: list[int]) -> np.ndarray:
-        missing = [c for c in cols if c not in self._static]
-        if missing:
-            E = np.zeros((self.n_dof, len(missing)))
-            E[missing, range(len(missing))] = 1.0
-            X = np.linalg.solve(self.K, E)
-            for j, c in enumerate(missing):
-                self._static[c] = X[:, j]
-        return np.column_stack([self._static[c] for c in cols])
+        self._R_high: np.ndarray | None = None
 
     def _mode_sens(self) -> tuple[dict, dict]:
         if self._sens is None:
             self._sens = mode_sensitivities(self.M, self.K, self.modes, self.dM, self.dK)
         return self._sens
 
+    def _high_flexibility(self) -> np.ndarray:
+        """Static flexibility of the truncated modes, ``sum_h phi phi^T / omega^2``, (n, n).
+
+        Summed mode by mode: ``K^-1 - sum_retained phi phi^T / omega^2`` is the same in exact
+        arithmetic, but on soft supports ``K^-1`` is dominated by the retained suspension modes
+        and the difference keeps their round-off.
+        """
+        if self._R_high is None:
+            high = np.setdiff1d(np.arange(len(self.all_modes)), self.keep)
+            ph = self.all_modes.phi[:, high]
+            self._R_high = (ph / self.all_modes.omega[high] ** 2) @ ph.T
+        return self._R_high
+
     def block(self, rows: list[int], cols: list[int]) -> _ModalBlock:
         """Receptance block between DOF index lists ``rows`` and ``cols``."""
         rows, cols = list(rows), list(cols)
         phi = self.modes.phi
-        lam = self.modes.omega**2
-        S = self._flex_columns(cols)
-        residual = S[rows] - (phi[rows] / lam) @ phi[cols].T
-        blk = _ModalBlock(phi[rows], phi[cols], self.modes.omega, self.modes.zeta, residual)
+        R = self._high_flexibility()
+        blk = _ModalBlock(phi[rows], phi[cols], self.modes.omega, self.modes.zeta,
+                          R[np.ix_(rows, cols)].copy())
         if self.param_names:
             dlam, dphi = self._mode_sens()
-            Sr = self._flex_columns(rows)
+            M = self.M
             for p in self.param_names:
-                dS = -(Sr.T @ self.dK[p] @ S)
-                dpr, dpc = dphi[p][rows], dphi[p][cols]
-                dres = dS - (dpr / lam) @ phi[cols].T - (phi[rows] / lam) @ dpc.T
-                dres += (phi[rows] * dlam[p] / lam**2) @ phi[cols].T
-                blk.sens[p] = (dpr, dpc, dlam[p], dres)
+                dK = self.dK[p]
+                dM = self.dM.get(p)
+                dX = dphi[p]
+                # dR_h = -R dK R - X (dX^T M + X^T dM) R - R (M dX + dM X) X^T: no cancellation
+                A = dX.T @ M + (phi.T @ dM if dM is not None else 0.0)
+                B = M @ dX + (dM @ phi if dM is not None else 0.0)
+                dres = -(R[rows] @ dK @ R[:, cols])
+                dres -= phi[rows] @ (A @ R[:, cols])
+                dres -= (R[rows] @ B) @ phi[cols].T
+                blk.sens[p] = (dX[rows], dX[cols], dlam[p], dres)
         return blk
 
 

@@ -56,14 +56,18 @@ def _reduced_matrices(omega: np.ndarray, H: np.ndarray, order: int, T: float) ->
     """Reduced normal matrix of the denominator, shape (order + 1, order + 1)."""
     X = np.exp(-1j * np.outer(omega, np.arange(order + 1)) * T)  # (nf, n+1)
     R0 = (X.conj().T @ X).real
-    cho = sla.cho_factor(R0)
+    try:
+        cho = sla.cho_factor(R0)
+        R0_inv = sla.cho_solve(cho, np.eye(R0.shape[0]))
+    except np.linalg.LinAlgError:  # a narrow band far from 0 Hz at a high order
+        R0_inv = sla.pinvh(R0)
     Mred = np.zeros_like(R0)
     for o in range(H.shape[1]):
         h = H[:, o]
         w2 = 1.0 / max(float(np.mean(np.abs(h) ** 2)), 1e-300)  # channels weighted equally
         S = -(X.conj().T @ (h[:, None] * X)).real
         Tm = (X.conj().T @ ((np.abs(h) ** 2)[:, None] * X)).real
-        Mred += w2 * (Tm - S.T @ sla.cho_solve(cho, S))
+        Mred += w2 * (Tm - S.T @ R0_inv @ S)
     return Mred
 
 
@@ -122,15 +126,17 @@ def stable_poles(
     *,
     max_order: int = 48,
     zeta_max: float = 0.2,
-    tol_frequency: float = 0.005,
-    tol_zeta: float = 0.1,
+    tol_frequency: float = 0.01,
+    tol_zeta: float = 0.2,
+    tol_group: float = 0.005,
     min_fraction: float = 0.3,
 ) -> list[StablePole]:
     """Poles stable over LSCF model orders 4, 6, ..., ``max_order``.
 
     A pole at order ``n`` is stable when order ``n - 2`` has one within ``tol_frequency``
-    (relative) in frequency and ``tol_zeta`` (relative) in damping. Stable poles are grouped
-    by frequency (gaps above ``tol_frequency``); a group found at no fewer than
+    (relative) in frequency and ``tol_zeta`` (relative) in damping (loose: the starting poles
+    are refined by the pole-residue fit). Stable poles are grouped by frequency (a relative gap
+    above ``tol_group`` starts a new group); a group found at no fewer than
     ``min_fraction`` of the orders (and at least 3) gives one pole, the median of the group.
 
     Parameters
@@ -138,7 +144,8 @@ def stable_poles(
     frequency_hz : ndarray, shape (nf,), Hz
     H : ndarray, shape (nf, C), complex
     band_hz : (float, float)
-        Only poles with natural frequency inside are kept.
+        Only poles with natural frequency inside are returned (stability is judged over all
+        fitted frequencies, so a pole on the band's edge is not lost).
 
     Returns
     -------
@@ -149,8 +156,9 @@ def stable_poles(
     poles = lscf_poles(frequency_hz, H, orders, f_max)
     stable: list[tuple[float, float]] = []
     prev = np.zeros((0, 2))
+    fitted = (float(np.min(frequency_hz)), float(np.max(frequency_hz)))
     for n in orders:
-        rows = _physical(poles[n], band_hz, zeta_max)
+        rows = _physical(poles[n], fitted, zeta_max)
         for f, z in rows:
             if prev.size:
                 df = np.abs(prev[:, 0] - f) / f
@@ -161,12 +169,12 @@ def stable_poles(
     if not stable:
         return []
     arr = np.array(sorted(stable))
-    groups = np.split(arr, np.flatnonzero(np.diff(arr[:, 0]) / arr[1:, 0] > tol_frequency) + 1)
+    groups = np.split(arr, np.flatnonzero(np.diff(arr[:, 0]) / arr[1:, 0] > tol_group) + 1)
     need = max(3, int(np.ceil(min_fraction * len(orders))))
     out = [
         StablePole(float(np.median(g[:, 0])), float(np.median(g[:, 1])), len(g))
         for g in groups
-        if len(g) >= need
+        if len(g) >= need and band_hz[0] <= np.median(g[:, 0]) <= band_hz[1]
     ]
     log.debug("LSCF: %d stable poles from orders %d..%d", len(out), orders[0], orders[-1])
     return out
@@ -179,13 +187,15 @@ def starting_poles(
     *,
     max_order: int = 32,
     zeta_max: float = 0.2,
+    margin: float = 0.02,
 ) -> list[StablePole]:
     """Stable poles over a wide band, found sub-band by sub-band.
 
     One z-domain model over a band of several decades resolves its low modes poorly (they
     crowd near ``z = 1``). The band is cut at ``f_lo * 2^k``; sub-band ``k`` spans
     ``[e_(k-1), e_(k+2)]`` (three octaves) and contributes the stable poles of its middle
-    octave ``[e_k, e_(k+1)]``.
+    octave ``[e_k, e_(k+1)]`` widened by ``margin`` (relative); of two poles from neighbouring
+    sub-bands within 0.5 % of each other the one stable over more orders is kept.
 
     Parameters
     ----------
@@ -202,13 +212,22 @@ def starting_poles(
     n_oct = max(1, int(np.ceil(np.log2(hi / lo))))
     edges = lo * 2.0 ** np.arange(n_oct + 1)
     edges[-1] = hi
-    out: list[StablePole] = []
+    found: list[tuple[float, int, StablePole]] = []
     for k in range(n_oct):
         a, b = edges[max(k - 1, 0)], edges[min(k + 2, n_oct)]
         m = (f >= a) & (f <= b)
         if np.count_nonzero(m) < 8:
             continue
-        core = (edges[k], edges[k + 1])
-        found = stable_poles(f[m], H[m], core, max_order=max_order, zeta_max=zeta_max)
-        out += [p for p in found if not out or p.frequency_hz > out[-1].frequency_hz]
-    return out
+        core = (edges[k] / (1 + margin), edges[k + 1] * (1 + margin))
+        poles = stable_poles(f[m], H[m], core, max_order=max_order, zeta_max=zeta_max)
+        found += [(p.frequency_hz, k, p) for p in poles]
+    # a pole near an octave edge may come from both neighbours: keep the better supported
+    out: list[tuple[float, int, StablePole]] = []
+    for item in sorted(found, key=lambda t: t[0]):
+        f_r, k, p = item
+        if out and out[-1][1] != k and f_r - out[-1][0] < 0.005 * f_r:
+            if p.n_orders > out[-1][2].n_orders:
+                out[-1] = item
+        else:
+            out.append(item)
+    return [p for f_r, _, p in out if lo <= f_r <= hi]

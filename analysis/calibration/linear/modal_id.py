@@ -60,7 +60,7 @@ class ModalFit:
     residual : ndarray, shape (5, C)
         Residual terms ``u0, u2, u4, l, v`` (unit of H).
     band_hz : (float, float)
-    x, cost, jac, nfev, success, message
+    x, cost, nfev, success, message
         Of the final pole iteration (``x = [log omega_r, log zeta_r]``, cost as scipy).
     rms_relative_error : float
         RMS of ``|H_fit - H| / |H|`` over the fitted points.
@@ -74,7 +74,6 @@ class ModalFit:
     band_hz: tuple[float, float]
     x: np.ndarray
     cost: float
-    jac: np.ndarray | None
     nfev: int
     success: bool
     message: str
@@ -133,7 +132,6 @@ class _Projection:
     def __init__(self, w: np.ndarray, H: np.ndarray, weights: np.ndarray, band_hz) -> None:
         self.w, self.H, self.W = w, H, weights
         self.R = _residual_basis(w, band_hz)
-        self.m = 0
 
     def columns(self, wr: np.ndarray, zr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         w = self.w[:, None]
@@ -144,7 +142,7 @@ class _Projection:
         m = x.size // 2
         wr, zr = np.exp(x[:m]), np.exp(x[m:])
         g, ig = self.columns(wr, zr)
-        Phi = np.concatenate([g, ig, self.R], axis=1)  # (nf, 2m + 3) complex
+        Phi = np.concatenate([g, ig, self.R], axis=1)  # (nf, 2m + 5) complex
         nf, C = self.H.shape
         coef = np.empty((Phi.shape[1], C))
         res = np.empty((2 * nf, C))
@@ -161,8 +159,10 @@ class _Projection:
             y = self.H[:, c] * self.W[:, c]
             yr = np.concatenate([y.real, y.imag])
             Q, Rm = np.linalg.qr(Ar / scale)
-            cs = np.linalg.solve(Rm, Q.T @ yr) if np.all(np.abs(np.diag(Rm)) > 1e-14) else (
-                np.linalg.lstsq(Ar / scale, yr, rcond=None)[0])  # fmt: skip
+            if np.all(np.abs(np.diag(Rm)) > 1e-14):
+                cs = np.linalg.solve(Rm, Q.T @ yr)
+            else:  # dependent columns (coincident poles): minimum-norm coefficients
+                cs = np.linalg.lstsq(Ar / scale, yr, rcond=None)[0]
             coef[:, c] = cs / scale
             res[:, c] = (Ar / scale) @ cs - yr
             if want_jac:
@@ -210,8 +210,9 @@ def fit_poles(
         weights = 1.0 / np.maximum(np.abs(H), 1e-12 * np.abs(H).max(axis=0))
     proj = _Projection(2 * np.pi * f, H, np.asarray(weights, dtype=float), band)
     m = len(frequency0_hz)
-    x0 = np.concatenate([np.log(2 * np.pi * np.asarray(frequency0_hz, float)),
-                         np.log(np.asarray(zeta0, float))])  # fmt: skip
+    x0 = np.concatenate(
+        [np.log(2 * np.pi * np.asarray(frequency0_hz, float)), np.log(np.asarray(zeta0, float))]
+    )
     if m:
         cache: dict = {}
 
@@ -227,11 +228,22 @@ def fit_poles(
 
         lo = np.concatenate([x0[:m] - 0.2, np.full(m, np.log(1e-5))])
         hi = np.concatenate([x0[:m] + 0.2, np.full(m, np.log(0.5))])
-        sol = least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale=1.0,
-                            xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=max_nfev)  # fmt: skip
-        x, cost, J, nfev, ok, msg = sol.x, sol.cost, sol.jac, sol.nfev, sol.success, sol.message
+        x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
+        sol = least_squares(
+            fun,
+            x0,
+            jac=jac,
+            bounds=(lo, hi),
+            method="trf",
+            x_scale=1.0,
+            xtol=1e-12,
+            ftol=1e-12,
+            gtol=1e-12,
+            max_nfev=max_nfev,
+        )
+        x, nfev, ok, msg = sol.x, sol.nfev, sol.success, sol.message
     else:
-        x, J, nfev, ok, msg = x0, None, 1, True, "no poles: residual terms only"
+        x, nfev, ok, msg = x0, 1, True, "no poles: residual terms only"
     res, coef, _ = proj.solve(x, False)
     cost = 0.5 * float(np.sum(res**2))
     order = np.argsort(x[:m])
@@ -247,7 +259,6 @@ def fit_poles(
         band_hz=band,
         x=_ro(np.concatenate([np.log(wr), np.log(zr)])),
         cost=cost,
-        jac=J,
         nfev=int(nfev),
         success=bool(ok),
         message=str(msg),
@@ -328,6 +339,11 @@ def identify_modes(
             break
         log.debug("dropping poles at %s Hz", np.round(fit.frequency_hz[~keep], 3))
         fit = fit_poles(f, H, fit.frequency_hz[keep], fit.zeta[keep], band_hz=(lo, hi), weights=W)
-    log.info("identified %d modes in %g-%g Hz (rms relative error %.2g)", fit.n_modes, lo, hi,
-             fit.rms_relative_error)  # fmt: skip
+    log.info(
+        "identified %d modes in %g-%g Hz (rms relative error %.2g)",
+        fit.n_modes,
+        lo,
+        hi,
+        fit.rms_relative_error,
+    )
     return fit

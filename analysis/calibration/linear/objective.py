@@ -11,8 +11,17 @@ difference), which weighs phase like magnitude. The default leaves phase out: lo
 are smooth in the parameters and insensitive to sensor-phase errors.
 
 Jacobian (chain rule through the log): ``d r / d theta = Re(dH / H) / ln 10 * dp / dtheta``
-(``Im`` for the phase part), with ``dH/dp`` the exact receptance derivative of
+(``Im`` for the phase part), with ``dH/dp`` the exact receptance derivative of the blocks of
 :class:`analysis.linear.receptance.ModalLinearModel` (modal damping ratios held at ``zeta0``).
+
+The static flexibility of the modes above ``f_max_hz`` is summed mode by mode,
+``R_h = P K^-1 P^T`` with the mass-orthogonal projector ``P = I - X_l X_l^T M`` off the retained
+modes ``X_l``, and differentiated as
+
+    dR_h = -R_h dK R_h - X_l (dX_l^T M + X_l^T dM) R_h - R_h (M dX_l + dM X_l) X_l^T,
+
+which, unlike ``d(K^-1) - d(X_l diag(omega_l^-2) X_l^T)``, involves no cancellation of the
+large flexibility of the mount modes.
 """
 
 from __future__ import annotations
@@ -22,10 +31,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from analysis.calibration.parameters import ParameterSpace
+from analysis.linear.modal import mode_sensitivities
 from analysis.linear.receptance import ModalLinearModel
 from analysis.model import Model
 
-__all__ = ["EqualizedFRFObjective"]
+__all__ = ["EqualizedFRFObjective", "receptance"]
 
 LN10 = np.log(10.0)
 
@@ -86,29 +96,35 @@ class EqualizedFRFObjective:
     def n_residuals(self) -> int:
         return self.target.size * (2 if self.use_phase else 1)
 
-    def linear_model(self, values: dict[str, float]) -> ModalLinearModel:
-        """The equalized model at parameter ``values`` (with derivatives for the space)."""
-        asm = self.model.with_values(values).assemble()
-        names = self.space.names
-        return ModalLinearModel(
-            asm.M, asm.K, self.zeta0, f_max_hz=self.f_max_hz,
-            dM={n: asm.dM[n] for n in names}, dK={n: asm.dK[n] for n in names},
-        )  # fmt: skip
-
     def frf(self, theta: np.ndarray, want_jac: bool = False):
         """Model receptances ``(nk, C)`` and, optionally, ``dH/dtheta`` ``(nk, C, n)``."""
         p = self.space.to_physical(theta)
-        lin = self.linear_model(self.space.as_dict(p))
+        asm = self.model.with_values(self.space.as_dict(p)).assemble()
+        lin = ModalLinearModel(asm.M, asm.K, self.zeta0, f_max_hz=self.f_max_hz)
         blk = lin.block(self.rows, [self.col])
-        blk.residual = _high_mode_flexibility(lin, self.rows, [self.col])
+        idx = sorted(set(self.rows) | {self.col})
+        R = _high_mode_flexibility(lin, idx)  # (n, len(idx))
+        Rr = R[:, [idx.index(i) for i in self.rows]]
+        Rc = R[:, [idx.index(self.col)]]
+        blk.residual = Rr[[self.col]].T
         H = blk(self.omega)[:, :, 0]
         if not want_jac:
             return H, None
+        names = self.space.names
+        dM = {n: asm.dM[n] for n in names}
+        dK = {n: asm.dK[n] for n in names}
+        dlam, dphi = mode_sensitivities(asm.M, asm.K, lin.modes, dM, dK)
+        phi, M = lin.modes.phi, asm.M
+        for n in names:
+            dres = -Rr.T @ dK[n] @ Rc
+            dres -= phi[self.rows] @ ((dphi[n].T @ M + phi.T @ dM[n]) @ Rc)
+            dres -= (Rr.T @ (M @ dphi[n] + dM[n] @ phi)) @ phi[[self.col]].T
+            blk.sens[n] = (dphi[n][self.rows], dphi[n][[self.col]], dlam[n], dres)
         dp = self.space.dp_dtheta(theta)
         dH = np.stack(
-            [blk.derivative(self.omega, n)[:, :, 0] * dp[j]
-             for j, n in enumerate(self.space.names)], axis=-1,
-        )  # fmt: skip
+            [blk.derivative(self.omega, n)[:, :, 0] * dp[j] for j, n in enumerate(names)],
+            axis=-1,
+        )
         return H, dH
 
     def __call__(self, theta: np.ndarray, want_jac: bool = True):
@@ -132,15 +148,41 @@ class EqualizedFRFObjective:
         return self(theta, want_jac=False)[0]
 
 
-def _high_mode_flexibility(lin: ModalLinearModel, rows: list[int], cols: list[int]) -> np.ndarray:
-    """Static flexibility of the modes not superposed, summed mode by mode, shape (nr, nc).
+def _high_mode_flexibility(lin: ModalLinearModel, cols: list[int]) -> np.ndarray:
+    """Static flexibility of the modes not superposed, columns ``cols``, shape (n, nc).
 
-    The same quantity as ``K^-1 - sum_retained phi phi^T / omega^2`` but free of its
-    cancellation: on soft mounts ``K^-1`` is dominated by the mount modes, and the difference
-    keeps only round-off noise of that size, which makes the FRFs of weakly responding channels
-    jitter between nearby parameter values.
+    ``R_h = sum_(r not retained) phi_r phi_r^T / omega_r^2``, summed mode by mode. It equals
+    ``K^-1 - sum_retained phi phi^T / omega^2`` but without its cancellation: on soft mounts
+    ``K^-1`` is dominated by the mount modes, and the difference keeps round-off of that size,
+    which makes weakly responding channels jitter between nearby parameter values.
     """
     modes = lin.all_modes
     high = np.setdiff1d(np.arange(len(modes)), lin.keep)
     phi = modes.phi[:, high]
-    return (phi[rows] / modes.omega[high] ** 2) @ phi[cols].T
+    return (phi / modes.omega[high] ** 2) @ phi[cols].T
+
+
+def receptance(
+    model: Model,
+    rows: Sequence[int],
+    col: int,
+    frequency_hz: np.ndarray,
+    *,
+    zeta: float | dict[int, float] | None = None,
+    f_max_hz: float,
+) -> np.ndarray:
+    """Model receptances ``H[rows, col]``, shape (nf, C), m/N.
+
+    Modes up to ``f_max_hz`` are superposed with damping ``zeta`` (one ratio, or
+    ``{mode: ratio}``; default: the model's :class:`~analysis.model.DampingSpec`), the rest
+    enter as their static flexibility.
+    """
+    asm = model.assemble()
+    if zeta is None:
+        zeta = dict(model.damping.per_mode)
+    lin = ModalLinearModel(
+        asm.M, asm.K, zeta, default_zeta=model.damping.default_zeta, f_max_hz=f_max_hz
+    )
+    blk = lin.block(list(rows), [col])
+    blk.residual = _high_mode_flexibility(lin, [col])[list(rows)]
+    return blk(2 * np.pi * np.asarray(frequency_hz, dtype=float))[:, :, 0]

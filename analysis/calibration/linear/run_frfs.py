@@ -15,7 +15,7 @@ from os import PathLike
 
 import numpy as np
 
-from analysis.measurement_file import RandomData, read_measurement
+from analysis.measurement_file import RandomData, RunData, read_measurement
 from analysis.model import Model
 
 __all__ = ["CalibrationError", "RunFRFs", "load_random_run", "sensor_masses"]
@@ -91,6 +91,7 @@ def load_random_run(run: RandomData | str | PathLike[str], model: Model) -> RunF
     Parameters
     ----------
     run : RandomData or path
+        Any other kind of run is refused.
     model : Model
         Must have every measured point and the drive point.
 
@@ -100,7 +101,7 @@ def load_random_run(run: RandomData | str | PathLike[str], model: Model) -> RunF
         A stepped-sine file, no motion channel, or a channel or the drive at a point or
         direction the model lacks.
     """
-    data = read_measurement(run) if not isinstance(run, RandomData) else run
+    data = run if isinstance(run, RunData) else read_measurement(run)
     if not isinstance(data, RandomData):
         raise CalibrationError(
             f"{data.path}: kind {type(data).__name__} is not a random-excitation run; linear "
@@ -108,8 +109,14 @@ def load_random_run(run: RandomData | str | PathLike[str], model: Model) -> RunF
         )
     asm = model.assemble()
     act = data.actuator
-    _check_dof(asm, model, data, f"the actuator (point {act.point}, {act.direction})",
-               act.point, act.direction.lstrip("-"))  # fmt: skip
+    _check_dof(
+        asm,
+        model,
+        data,
+        f"the actuator (point {act.point}, {act.direction})",
+        act.point,
+        act.direction.lstrip("-"),
+    )
     keep = [
         i
         for i, ch in enumerate(data.channels)
@@ -123,8 +130,14 @@ def load_random_run(run: RandomData | str | PathLike[str], model: Model) -> RunF
     H = np.empty((w.size, len(keep)), dtype=complex)
     for j, i in enumerate(keep):
         ch = data.channels[i]
-        _check_dof(asm, model, data, f"channel {ch.name!r} (point {ch.point}, {ch.direction})",
-                   ch.point, ch.direction.lstrip("-"))  # fmt: skip
+        _check_dof(
+            asm,
+            model,
+            data,
+            f"channel {ch.name!r} (point {ch.point}, {ch.direction})",
+            ch.point,
+            ch.direction.lstrip("-"),
+        )
         sign = -1.0 if ch.direction.startswith("-") else 1.0
         H[:, j] = sign * data.h1[pos, i] / (1j * w) ** MOTION[ch.quantity]
     sign_act = -1.0 if act.direction.startswith("-") else 1.0

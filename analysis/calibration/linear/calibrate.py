@@ -1,0 +1,390 @@
+"""Linear calibration from a random-excitation run with damping equalization.
+
+>>> result = calibrate_linear(load_model(), "random.h5")            # doctest: +SKIP
+>>> result.parameters["k_mount"], result.std["k_mount"]              # doctest: +SKIP
+>>> result.save_model("calibrated_model.toml")                       # doctest: +SKIP
+
+Steps: the sensors' masses of the channel table are added to the model; the run's motion FRFs
+become receptances along the model axes; the test modes in the band are identified
+(:func:`~analysis.calibration.linear.modal_id.identify_modes`); the test FRFs are re-synthesised
+with every mode at ``zeta0`` at frequencies within the modes' half-power bands, and the model's
+FRFs with the same ``zeta0`` are fitted to them on log10 magnitude
+(:class:`~analysis.calibration.linear.objective.EqualizedFRFObjective`) by a bounded
+Levenberg-Marquardt with the analytic Jacobian. The fit runs as a damping continuation: first
+at larger equalized damping (0.2, 0.1, 0.05, 0.02), whose smoother metric has a wide basin of
+attraction, each stage starting the next, then at ``zeta0``. The identified modal damping is
+paired with the calibrated model's modes (MAC and frequency) and written to its
+``DampingSpec.per_mode``.
+
+The split of the FRFs into calibration and validation sets is
+:func:`~analysis.calibration.linear.split.split_channels` (default: points 1-8 and 11 calibrate,
+9, 10, 12 and 13 validate).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from os import PathLike
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from analysis.calibration.linear.damping_equalization import equalize
+from analysis.calibration.linear.modal_id import identify_modes
+from analysis.calibration.linear.mode_matching import match_modes, renumber_modes
+from analysis.calibration.linear.objective import EqualizedFRFObjective, receptance
+from analysis.calibration.linear.result import LinearCalibration
+from analysis.calibration.linear.run_frfs import (
+    CalibrationError,
+    RunFRFs,
+    load_random_run,
+    sensor_masses,
+)
+from analysis.calibration.linear.split import DEFAULT_CALIBRATION_POINTS, split_channels
+from analysis.calibration.lm import LeastSquaresResult, least_squares_lm
+from analysis.calibration.parameters import ParameterSpace
+from analysis.linear.modal import modal_analysis
+from analysis.measurement_file import RandomData, RunData, read_measurement
+from analysis.model import DampingSpec, Model
+
+__all__ = [
+    "DEFAULT_CALIBRATION_POINTS",
+    "METHODS",
+    "LinearCalibrationSettings",
+    "calibrate_linear",
+]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class LinearCalibrationSettings:
+    """Settings of :func:`calibrate_linear` (validated on construction).
+
+    Parameters
+    ----------
+    parameters : tuple of str, optional
+        Calibrated parameters (group ``"linear"``); default: those flagged ``calibrate``.
+    calibration_points : tuple of int, "default" or "information"
+        Points whose FRFs calibrate; the other measured points validate. ``"default"``:
+        :data:`DEFAULT_CALIBRATION_POINTS` when all of them and another point are measured,
+        otherwise ``"information"`` with ``n_calibration`` points.
+    n_calibration : int, optional
+        Points chosen by ``"information"`` (default ``round(9/13 * n_points)``).
+    band_hz : (float, float), optional
+        Band of the modal identification (default: the file's positive frequencies).
+    zeta0 : float, optional
+        Equalized damping (default: mean identified damping, clipped to [0.005, 0.05]).
+    zeta0_schedule : tuple of float
+        Damping continuation: the values above ``zeta0`` are calibrated first, in the given
+        order, each stage starting the next, then ``zeta0``. A larger equalized damping gives
+        a smoother metric with a wider basin of attraction (wider half-power bands); the last
+        stage restores the resolution. ``()`` calibrates at ``zeta0`` only.
+    n_per_band : int
+        Metric frequencies per half-power band.
+    use_phase : bool
+        Add the phase deviation to the log-magnitude residuals.
+    method : {"lm", "trf"}
+        ``"lm"``: Levenberg-Marquardt with steps projected onto the bounds (the paper's
+        method); ``"trf"``: scipy's trust-region reflective least squares.
+    max_iterations : int
+    min_modes : int, optional
+        Fewest identified modes accepted (default: the number of parameters).
+    min_coherence : float
+        Frequencies where any channel's coherence is lower are left out of the identification.
+    f_max_factor : float
+        Model modes up to ``f_max_factor`` times the band's top are superposed; the rest enter
+        as static flexibility.
+    mac_min : float
+        Least MAC for pairing a test mode with a model mode.
+    keep_sensor_masses : bool
+        Keep the run's sensor masses in the calibrated model file (default: the file describes
+        the structure; each run adds its own sensors).
+    """
+
+    parameters: tuple[str, ...] | None = None
+    calibration_points: tuple[int, ...] | str = "default"
+    n_calibration: int | None = None
+    band_hz: tuple[float, float] | None = None
+    zeta0: float | None = None
+    zeta0_schedule: tuple[float, ...] = (0.2, 0.1, 0.05, 0.02)
+    n_per_band: int = 9
+    use_phase: bool = False
+    method: str = "lm"
+    max_iterations: int = 100
+    min_modes: int | None = None
+    min_coherence: float = 0.0
+    f_max_factor: float = 10.0
+    mac_min: float = 0.5
+    keep_sensor_masses: bool = False
+
+    def __post_init__(self) -> None:
+        cp = self.calibration_points
+        if isinstance(cp, str):
+            if cp not in ("default", "information"):
+                raise ValueError("calibration_points: 'default', 'information' or point numbers")
+        else:
+            object.__setattr__(self, "calibration_points", tuple(int(p) for p in cp))
+            if not self.calibration_points:
+                raise ValueError("calibration_points: give at least one point")
+        if self.parameters is not None:
+            object.__setattr__(self, "parameters", tuple(self.parameters))
+        if self.band_hz is not None:
+            lo, hi = map(float, self.band_hz)
+            if not 0 < lo < hi:
+                raise ValueError(f"band_hz: need 0 < low < high, got {self.band_hz!r}")
+            object.__setattr__(self, "band_hz", (lo, hi))
+        if self.zeta0 is not None and not 0 < self.zeta0 < 0.5:
+            raise ValueError(f"zeta0: must be in (0, 0.5), got {self.zeta0!r}")
+        object.__setattr__(self, "zeta0_schedule", tuple(float(z) for z in self.zeta0_schedule))
+        if not all(0 < z < 0.5 for z in self.zeta0_schedule):
+            raise ValueError(f"zeta0_schedule: values in (0, 0.5), got {self.zeta0_schedule!r}")
+        if self.method not in METHODS:
+            raise ValueError(f"method: one of {sorted(METHODS)}, got {self.method!r}")
+        if self.n_per_band < 2 or self.max_iterations < 1 or self.f_max_factor < 1:
+            raise ValueError("n_per_band >= 2, max_iterations >= 1 and f_max_factor >= 1")
+        if not 0 <= self.min_coherence < 1 or not 0 <= self.mac_min <= 1:
+            raise ValueError("min_coherence in [0, 1) and mac_min in [0, 1]")
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
+
+
+# -- solvers ------------------------------------------------------------------------------
+def _solve_lm(obj, x0, bounds, max_iterations) -> LeastSquaresResult:
+    return least_squares_lm(obj, x0, bounds=bounds, max_iterations=max_iterations)
+
+
+def _solve_trf(obj, x0, bounds, max_iterations) -> LeastSquaresResult:
+    sol = least_squares(
+        lambda x: obj(x, False)[0],
+        x0,
+        jac=lambda x: obj(x, True)[1],
+        bounds=bounds,
+        method="trf",
+        max_nfev=max_iterations,
+    )
+    J = sol.jac
+    cov = np.linalg.pinv(J.T @ J)
+    njev = int(sol.njev or 0)
+    return LeastSquaresResult(
+        sol.x,
+        float(sol.cost),
+        sol.fun,
+        J,
+        cov,
+        int(sol.nfev),
+        njev,
+        njev,
+        bool(sol.success),
+        str(sol.message),
+    )
+
+
+METHODS = {"lm": _solve_lm, "trf": _solve_trf}
+"""Solver kernels by name: ``(objective, x0, bounds, max_iterations) -> LeastSquaresResult``."""
+
+
+# -- the entry point ----------------------------------------------------------------------
+def calibrate_linear(
+    model: Model,
+    run: RandomData | str | PathLike[str],
+    settings: LinearCalibrationSettings | None = None,
+    **changes: Any,
+) -> LinearCalibration:
+    """Calibrate the linear parameters of ``model`` on a random-excitation run.
+
+    Parameters
+    ----------
+    model : Model
+        The start model (its parameter values start the iteration).
+    run : RandomData or path
+        A ``kind = "random"`` measurement file (H1 of every channel to the drive force).
+    settings : LinearCalibrationSettings, optional
+    **changes
+        Fields of ``settings`` to replace, e.g. ``zeta0=0.01``.
+
+    Returns
+    -------
+    LinearCalibration
+        ``validation["before"|"after"]`` holds, per channel and as RMS over the calibration and
+        validation channels, the log10-magnitude deviation at the metric frequencies with every
+        mode at ``zeta0`` (``"equalized"``) and over the band against the measured FRFs with
+        the model's damping (``"measured"``: the start model's own, the calibrated model's
+        identified per-mode damping).
+
+    Raises
+    ------
+    CalibrationError
+        Wrong file kind, a channel at a point the model lacks, parameters not of group
+        ``"linear"``, or fewer identified modes than ``min_modes``.
+    """
+    st = dataclasses.replace(settings or LinearCalibrationSettings(), **changes)
+    t0 = time.perf_counter()
+    data = run if isinstance(run, RunData) else read_measurement(run)
+    run_frfs = load_random_run(data, model)  # checks the kind and the points
+    masses = sensor_masses(data)
+    model_s = model.add_masses(masses) if masses else model
+    names = _parameter_names(model, st.parameters)
+    space = ParameterSpace.from_model(model_s, names)
+    f, H, band = _band(run_frfs, st)
+    fit = identify_modes(f, H, band)
+    n_min = len(names) if st.min_modes is None else st.min_modes
+    if fit.n_modes < n_min:
+        raise CalibrationError(
+            f"{run_frfs.source}: {fit.n_modes} mode(s) identified in {band[0]:g}-{band[1]:g} Hz; "
+            f"calibrating {len(names)} parameter(s) needs at least {n_min}: widen the band or "
+            "calibrate fewer parameters"
+        )
+    zeta0 = st.zeta0 if st.zeta0 is not None else float(np.clip(np.mean(fit.zeta), 0.005, 0.05))
+    eq = equalize(fit, zeta0, st.n_per_band)
+    t_id = time.perf_counter()
+
+    rows, col = run_frfs.dofs(model_s)
+    f_max = st.f_max_factor * band[1]
+    p0 = np.array([model.parameters[n].value for n in names])
+    lo, hi = space.theta_bounds()
+    x0 = np.clip(space.to_theta(p0), lo, hi)
+
+    def objective(channels: list[int], eq) -> EqualizedFRFObjective:
+        return EqualizedFRFObjective(model_s, space, [rows[i] for i in channels], col,
+                                     eq.frequency_hz, eq.H[:, channels], eq.zeta0, f_max,
+                                     st.use_phase)  # fmt: skip
+
+    every = objective(list(range(len(rows))), eq)
+    cal, val = split_channels(run_frfs, st.calibration_points, every, x0, st.n_calibration)
+    sol, stages = _continuation(
+        lambda z: objective(cal, eq if z == zeta0 else equalize(fit, z, st.n_per_band)),
+        [z for z in st.zeta0_schedule if z > zeta0] + [zeta0],
+        x0,
+        (lo, hi),
+        st,
+    )
+    t_fit = time.perf_counter()
+
+    values = space.as_dict(space.to_physical(sol.x))
+    m, n = sol.jac.shape
+    D = space.dp_dtheta(sol.x)
+    cov = np.linalg.pinv(sol.jac.T @ sol.jac) * (2 * sol.cost / max(m - n, 1)) * np.outer(D, D)
+    model_cal = model_s.with_values(values)
+    pairs = _pair_modes(model_cal, fit, rows, band, st.mac_min)
+    damping = DampingSpec(
+        default_zeta=model.damping.default_zeta,
+        per_mode={pr.model_mode: pr.zeta for pr in pairs if pr.model_mode is not None},
+    )
+    if st.keep_sensor_masses or not masses:
+        out_model = model_cal.with_damping(damping)
+    else:
+        out_model = _without_sensors(model.with_values(values), model_cal, damping)
+
+    def deviations(x: np.ndarray, m_: Model) -> dict[str, Any]:
+        return _deviations(every, x, m_, run_frfs.channels, f, H, f_max, cal, val)
+
+    validation = {
+        "before": deviations(x0, model_s),
+        "after": deviations(sol.x, model_cal.with_damping(damping)),
+    }
+    t_end = time.perf_counter()
+    log.info("linear calibration: %s, %d iterations, cost %.4g", sol.message, sol.nit, sol.cost)
+    return LinearCalibration(
+        x=sol.x, cost=float(sol.cost), jac=sol.jac, cov=cov,
+        nfev=sum(g["nfev"] for g in stages), njev=sum(g["njev"] for g in stages),
+        nit=sum(g["nit"] for g in stages), success=sol.success, message=sol.message,
+        names=tuple(names), stages=stages,
+        parameters=values, start=space.as_dict(p0), zeta0=zeta0,
+        metric_frequency_hz=eq.frequency_hz,
+        calibration_channels=tuple(run_frfs.channels[i] for i in cal),
+        validation_channels=tuple(run_frfs.channels[i] for i in val),
+        calibration_points=tuple(sorted({run_frfs.points[i] for i in cal})),
+        validation_points=tuple(sorted({run_frfs.points[i] for i in val})),
+        fit=fit, modes=pairs, validation=validation, model=out_model,
+        settings={**st.to_json(), "zeta0_used": zeta0, "sensor_masses_kg": masses},
+        source=run_frfs.source,
+        timings={"identification_s": t_id - t0, "calibration_s": t_fit - t_id,
+                 "validation_s": t_end - t_fit, "total_s": t_end - t0},
+    )  # fmt: skip
+
+
+# -- helpers ------------------------------------------------------------------------------
+def _continuation(make_objective, zetas, x0, bounds, st):
+    """Solve stage by stage over ``zetas``; the last stage's solution and every stage's record."""
+    x, stages, sol = x0, [], None
+    for z in zetas:
+        sol = METHODS[st.method](make_objective(z), x, bounds, st.max_iterations)
+        x = sol.x
+        stages.append({"zeta0": z, "cost": float(sol.cost), "nit": int(sol.nit),
+                       "nfev": int(sol.nfev), "njev": int(sol.njev),
+                       "success": bool(sol.success), "message": sol.message})  # fmt: skip
+        log.info("zeta0 = %.4g: cost %.4g after %d iterations", z, sol.cost, sol.nit)
+    return sol, stages
+
+
+def _parameter_names(model: Model, names: Sequence[str] | None) -> list[str]:
+    names = list(names) if names is not None else model.parameter_names("linear", True)
+    if not names:
+        raise CalibrationError(f"{model.source}: no linear parameter is flagged calibrate")
+    for n in names:
+        if n not in model.parameters:
+            raise CalibrationError(f"unknown parameter {n!r}; known: {sorted(model.parameters)}")
+        if model.parameters[n].group != "linear":
+            raise CalibrationError(
+                f"parameter {n!r} is in group {model.parameters[n].group!r}; the linear "
+                "calibration calibrates group 'linear' only"
+            )
+    return names
+
+
+def _band(run: RunFRFs, st: LinearCalibrationSettings):
+    f = run.frequency_hz
+    band = st.band_hz or (float(f.min()), float(f.max()))
+    keep = (f >= band[0]) & (f <= band[1])
+    if st.min_coherence > 0:
+        keep &= np.min(run.coherence, axis=1) >= st.min_coherence
+    if np.count_nonzero(keep) < 16:
+        raise CalibrationError(
+            f"{run.source}: only {np.count_nonzero(keep)} frequencies in {band[0]:g}-"
+            f"{band[1]:g} Hz (with coherence >= {st.min_coherence:g})"
+        )
+    return f[keep], run.H[keep], band
+
+
+def _pair_modes(model: Model, fit, rows: list[int], band, mac_min: float):
+    asm = model.assemble()
+    modes = modal_analysis(asm.M, asm.K)
+    q = max(int(np.count_nonzero(modes.frequency_hz <= 2 * band[1])), fit.n_modes)
+    return match_modes(
+        fit.frequency_hz, fit.zeta, fit.a.T, modes.frequency_hz[:q], modes.phi[rows, :q], mac_min
+    )
+
+
+def _without_sensors(bare: Model, loaded: Model, damping: DampingSpec) -> Model:
+    """``bare`` with ``damping``'s mode numbers (of ``loaded``) carried over by MAC."""
+    a, b = loaded.assemble(), bare.assemble()
+    numbers = renumber_modes(a.M, a.K, b.M, b.K, list(damping.per_mode))
+    per_mode = dict(zip(numbers, damping.per_mode.values(), strict=True))
+    return bare.with_damping(DampingSpec(damping.default_zeta, per_mode))
+
+
+def _rms(x: np.ndarray) -> float | None:
+    return float(np.sqrt(np.mean(x**2))) if x.size else None
+
+
+def _deviations(obj, x, model, channels, f, H, f_max, cal, val) -> dict[str, Any]:
+    """Log10-magnitude deviations, equalized at the metric frequencies and over the band."""
+    r = obj.residuals(x)[: obj.target.size].reshape(obj.target.shape)
+    values = obj.space.as_dict(obj.space.to_physical(x))
+    Hm = receptance(model.with_values(values), obj.rows, obj.col, f, f_max_hz=f_max)
+    d = np.log10(np.abs(Hm)) - np.log10(np.abs(H))
+    out = {}
+    for key, dev in (("equalized", r), ("measured", d)):
+        out[key] = {
+            "calibration": _rms(dev[:, cal]),
+            "validation": _rms(dev[:, val]),
+            "per_channel": {ch: _rms(dev[:, i]) for i, ch in enumerate(channels)},
+        }
+    return out

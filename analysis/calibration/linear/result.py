@@ -1,0 +1,145 @@
+"""The result of a linear calibration and its JSON form."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from analysis.calibration.linear.modal_id import ModalFit
+from analysis.calibration.linear.mode_matching import ModePair
+from analysis.model import Model
+
+__all__ = ["LinearCalibration"]
+
+
+@dataclass
+class LinearCalibration:
+    """Result of :func:`~analysis.calibration.linear.calibrate.calibrate_linear`.
+
+    The first fields are those of a scipy optimisation result (in the scaled coordinates of
+    :class:`analysis.calibration.parameters.ParameterSpace`).
+
+    Attributes
+    ----------
+    x : ndarray, shape (n,)
+        Scaled solution.
+    cost : float
+        ``1/2 sum r^2`` of the calibration residuals (log10 units).
+    jac : ndarray, shape (m, n)
+        Jacobian of the residuals at ``x``.
+    cov : ndarray, shape (n, n)
+        Covariance of the physical parameters, ``D (J^T J)^-1 D s^2`` with ``D = dp/dtheta``
+        and the residual variance ``s^2 = 2 cost / (m - n)``. The residuals at neighbouring
+        metric frequencies are correlated, so this is a formal (optimistic) figure.
+    nfev, njev, nit : int
+        Totals over the damping-continuation stages.
+    success : bool
+    message : str
+        Of the last stage.
+    names : tuple of str
+    stages : list of dict
+        Per continuation stage: ``zeta0, cost, nit, nfev, njev, success, message``.
+    parameters, start : dict name -> float
+        Calibrated and starting values.
+    zeta0 : float
+        Equalized damping.
+    metric_frequency_hz : ndarray, shape (nk,), Hz
+    calibration_channels, validation_channels : tuple of str
+    calibration_points, validation_points : tuple of int
+    fit : ModalFit
+        The identified test modes (receptance, model axes, all motion channels).
+    modes : list of ModePair
+        Identified modes with damping and their calibrated-model partner.
+    validation : dict
+        ``{"before": {...}, "after": {...}}`` (see :func:`calibrate_linear`).
+    model : Model
+        The calibrated model (values replaced, ``DampingSpec.per_mode`` from the identified
+        damping).
+    settings : dict
+    timings : dict of str to float, s
+    """
+
+    x: np.ndarray
+    cost: float
+    jac: np.ndarray
+    cov: np.ndarray
+    nfev: int
+    njev: int
+    nit: int
+    success: bool
+    message: str
+    names: tuple[str, ...]
+    stages: list[dict[str, Any]]
+    parameters: dict[str, float]
+    start: dict[str, float]
+    zeta0: float
+    metric_frequency_hz: np.ndarray
+    calibration_channels: tuple[str, ...]
+    validation_channels: tuple[str, ...]
+    calibration_points: tuple[int, ...]
+    validation_points: tuple[int, ...]
+    fit: ModalFit
+    modes: list[ModePair]
+    validation: dict[str, dict[str, Any]]
+    model: Model
+    settings: dict[str, Any]
+    source: str = ""
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def std(self) -> dict[str, float]:
+        """Standard deviations of the parameters (physical units)."""
+        return dict(zip(self.names, np.sqrt(np.diag(self.cov)).tolist(), strict=True))
+
+    @property
+    def correlation(self) -> np.ndarray:
+        """Correlation matrix of the parameters, shape (n, n)."""
+        s = np.sqrt(np.diag(self.cov))
+        return self.cov / np.maximum(np.outer(s, s), 1e-300)
+
+    @property
+    def damping(self) -> dict[int, float]:
+        """Identified damping ratio by model mode number (the calibrated model's ``per_mode``)."""
+        return dict(self.model.damping.per_mode)
+
+    def save_model(self, path: str | Path) -> Path:
+        """Write the calibrated model file (a new file; the input model file is untouched)."""
+        return self.model.save(path)
+
+    def to_json(self) -> dict[str, Any]:
+        """Everything as JSON-ready types."""
+        return {
+            "source": self.source,
+            "success": self.success,
+            "message": self.message,
+            "cost": self.cost,
+            "nfev": self.nfev,
+            "njev": self.njev,
+            "nit": self.nit,
+            "names": list(self.names),
+            "stages": self.stages,
+            "parameters": self.parameters,
+            "start": self.start,
+            "std": self.std,
+            "cov": self.cov.tolist(),
+            "correlation": self.correlation.tolist(),
+            "zeta0": self.zeta0,
+            "n_residuals": int(self.jac.shape[0]),
+            "metric_frequency_hz": self.metric_frequency_hz.tolist(),
+            "calibration_channels": list(self.calibration_channels),
+            "validation_channels": list(self.validation_channels),
+            "calibration_points": list(self.calibration_points),
+            "validation_points": list(self.validation_points),
+            "identified_modes": {
+                "band_hz": list(self.fit.band_hz),
+                "rms_relative_error": self.fit.rms_relative_error,
+                "modes": [m.to_json() for m in self.modes],
+            },
+            "damping_per_mode": {str(k): v for k, v in self.damping.items()},
+            "validation": self.validation,
+            "settings": self.settings,
+            "timings": self.timings,
+        }

@@ -1,0 +1,158 @@
+"""Linear calibration end to end on synthetic runs of the reference rig with known truth.
+
+Truth: Table 2's calibrated values, 5.5 g sensors at the 13 points, modal damping
+``TRUE_ZETA``; start: the model file's nominal values. Tolerances: 0.5 % on the parameters and
+1 % on the damping without noise, 2 % and 10 % with 2 % complex noise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analysis.calibration.linear import (
+    CalibrationError,
+    LinearCalibrationSettings,
+    calibrate_linear,
+    sensor_masses,
+)
+from analysis.measurement_file import ChannelInfo, RandomFRF, read_measurement, write_random
+from analysis.model import load_model
+from tests.analysis import measurement_samples as ms
+from tests.analysis.calibration_linear.synthetic import SENSOR_MASS_KG, TRUE_VALUES, TRUE_ZETA
+
+
+def _errors(result) -> dict[str, float]:
+    return {n: abs(result.parameters[n] / TRUE_VALUES[n] - 1) for n in result.names}
+
+
+def test_recovers_parameters_without_noise(clean_result) -> None:
+    assert clean_result.success
+    assert clean_result.names == ("E_frame", "E_corner", "E_beam", "rho_corner", "k_mount")
+    assert max(_errors(clean_result).values()) < 5e-3, _errors(clean_result)
+
+
+def test_recovers_parameters_with_noise(noisy_result) -> None:
+    assert noisy_result.success
+    assert max(_errors(noisy_result).values()) < 0.02, _errors(noisy_result)
+
+
+@pytest.mark.parametrize("which, tol", [("clean_result", 0.01), ("noisy_result", 0.10)])
+def test_identified_damping_in_the_model(which: str, tol: float, request) -> None:
+    result = request.getfixturevalue(which)
+    per_mode = result.model.damping.per_mode
+    assert sorted(per_mode) == sorted(TRUE_ZETA)
+    for mode, zeta in TRUE_ZETA.items():
+        assert per_mode[mode] == pytest.approx(zeta, rel=tol)
+    assert all(m.mac > 0.99 for m in result.modes)
+    assert result.model.damping.default_zeta == load_model().damping.default_zeta
+
+
+def test_split_and_validation_improves(noisy_result) -> None:
+    r = noisy_result
+    assert r.calibration_points == (1, 2, 3, 4, 5, 6, 7, 8, 11)
+    assert r.validation_points == (9, 10, 12, 13)
+    assert len(r.calibration_channels) == 9 and len(r.validation_channels) == 4
+    before, after = r.validation["before"], r.validation["after"]
+    for key in ("equalized", "measured"):
+        assert after[key]["validation"] < 0.1 * before[key]["validation"]
+        assert after[key]["calibration"] < 0.1 * before[key]["calibration"]
+    # with the identified damping the model meets the measured FRFs to about the noise
+    assert after["measured"]["validation"] < 2 * np.log10(1.02)
+
+
+def test_covariance_and_correlation(noisy_result) -> None:
+    r = noisy_result
+    n = len(r.names)
+    assert r.cov.shape == (n, n) and np.allclose(r.cov, r.cov.T)
+    assert np.all(np.linalg.eigvalsh(r.cov) > 0)
+    np.testing.assert_allclose(np.diag(r.correlation), 1.0)
+    for name in r.names:
+        assert 0 < r.std[name] < 0.01 * r.parameters[name]
+    assert r.jac.shape == (r.metric_frequency_hz.size * 9, n)
+    assert [s["zeta0"] for s in r.stages] == [0.2, 0.1, 0.05, 0.02, r.zeta0]
+
+
+def test_sensor_masses_from_the_channel_table(clean_run) -> None:
+    masses = sensor_masses(read_measurement(clean_run))
+    # the impedance head's force and acceleration channels share a serial: counted once
+    assert masses == {p: pytest.approx(SENSOR_MASS_KG) for p in range(1, 14)}
+
+
+def test_model_file_written_new_and_reloads(clean_result, tmp_path: Path) -> None:
+    path = clean_result.save_model(tmp_path / "calibrated.toml")
+    reloaded = load_model(path)
+    for n in clean_result.names:
+        assert reloaded.parameters[n].value == pytest.approx(clean_result.parameters[n])
+    assert reloaded.damping == clean_result.model.damping
+    assert "sensors" not in {m.group for m in reloaded.frame.masses}  # the structure only
+    assert load_model().parameters["E_corner"].value == 150e9  # the input file is untouched
+    doc = json.loads(json.dumps(clean_result.to_json()))
+    assert doc["parameters"] == clean_result.parameters
+    assert len(doc["identified_modes"]["modes"]) == 7
+    assert doc["damping_per_mode"]["5"] == pytest.approx(TRUE_ZETA[5], rel=0.01)
+
+
+def test_trf_from_a_far_start(clean_run) -> None:
+    """The damping continuation brings trf from E_beam 19 % and E_frame 27 % off."""
+    start = load_model().with_values({"E_frame": 150e9, "E_beam": 240e9})
+    result = calibrate_linear(start, clean_run, method="trf")
+    assert max(_errors(result).values()) < 5e-3, _errors(result)
+
+
+def test_information_split_and_kept_sensors(clean_run) -> None:
+    settings = LinearCalibrationSettings(calibration_points="information", keep_sensor_masses=True)
+    result = calibrate_linear(load_model(), clean_run, settings)
+    assert len(result.calibration_points) == 9 and len(result.validation_points) == 4
+    assert set(result.calibration_points).isdisjoint(result.validation_points)
+    assert max(_errors(result).values()) < 5e-3
+    report = result.model.assemble().mass_report()
+    assert report["sensors"] == pytest.approx(13 * SENSOR_MASS_KG)
+
+
+# -- errors --------------------------------------------------------------------------------
+def test_rejects_a_stepped_sine_file(tmp_path: Path) -> None:
+    path = ms.write_sample_stepped_sine(tmp_path / "stepped.h5")
+    with pytest.raises(CalibrationError, match="random"):
+        calibrate_linear(load_model(), path)
+
+
+def test_rejects_a_channel_at_an_unknown_point(clean_run, tmp_path: Path) -> None:
+    data = read_measurement(clean_run)
+    extra = ChannelInfo("acc14", 14, "y", "acceleration", "m/s^2", 10.0, "mV/g", "response",
+                        0.0055, "A14")  # fmt: skip
+    frf = RandomFRF(
+        frequency_hz=data.frequency_hz,
+        h1=np.column_stack([data.h1, data.h1[:, -1]]),
+        coherence=np.column_stack([data.coherence, data.coherence[:, -1]]),
+        force_psd=data.force_psd, n_averages=data.n_averages, window=data.window,
+        overlap=data.overlap, fs_hz=data.fs_hz, rms_force_n=data.rms_force_n,
+    )  # fmt: skip
+    path = write_random(tmp_path / "extra.h5", channels=[*data.channels, extra],
+                        actuator=data.actuator, frf=frf, config={}, setup={})  # fmt: skip
+    with pytest.raises(CalibrationError, match="'acc14'.*no measurement point 14"):
+        calibrate_linear(load_model(), path)
+
+
+def test_rejects_too_few_modes_in_band(clean_run) -> None:
+    with pytest.raises(CalibrationError, match="1 mode.*20-40 Hz.*at least 5"):
+        calibrate_linear(load_model(), clean_run, band_hz=(20.0, 40.0))
+
+
+def test_rejects_nonlinear_parameters(clean_run) -> None:
+    with pytest.raises(CalibrationError, match="'k_c'.*group 'nonlinear'"):
+        calibrate_linear(load_model(), clean_run, parameters=("E_beam", "k_c"))
+
+
+@pytest.mark.parametrize(
+    "change",
+    [{"method": "simplex"}, {"zeta0": 0.7}, {"calibration_points": "best"},
+     {"band_hz": (50.0, 10.0)}, {"zeta0_schedule": (0.0,)}],
+)  # fmt: skip
+def test_settings_are_validated(change: dict) -> None:
+    with pytest.raises(ValueError):
+        dataclasses.replace(LinearCalibrationSettings(), **change)
