@@ -2,8 +2,8 @@
 
 The analytical multi-harmonic FRFs are computed as the paper prescribes: the model is driven by
 the *measured* force phasors of every step, in the measured order of the steps (each sweep warm-
-starts from its previous step, so a jump happens where the test's would), at the realised
-frequencies; the model's response is taken in each channel's quantity (acceleration phasors are
+starts from its previous step), at the realised frequencies; where a bistable region lets the
+model sit on another branch than the test did, the branch the measurement supports is taken; the model's response is taken in each channel's quantity (acceleration phasors are
 ``-(k w)^2`` times displacement phasors) and divided by the measured force, like the measured FRF.
 Sensor masses from the file's channel table are part of the model.
 """
@@ -74,6 +74,9 @@ class SteppedSinePredictor:
         that is not the drive force).
     n_harmonics, n_time, f_max_hz
         Balance settings (defaults: the validated analysis defaults).
+    branch_tolerance : float
+        Relative miss of the fundamental beyond which the other branch of a bistable region is
+        tried (see ``_follow``).
     """
 
     def __init__(
@@ -85,6 +88,7 @@ class SteppedSinePredictor:
         n_harmonics: int = DEFAULT_HARMONICS,
         n_time: int = DEFAULT_TIME_SAMPLES,
         f_max_hz: float = 2000.0,
+        branch_tolerance: float = 0.25,
     ) -> None:
         self.data = data
         self.settings = {"n_harmonics": n_harmonics, "n_time": n_time, "f_max_hz": f_max_hz}
@@ -123,6 +127,7 @@ class SteppedSinePredictor:
         self._force_dof = self._dof(asm, act.point, act.direction, "actuator")
         self._force_sign = -1.0 if act.direction.startswith("-") else 1.0
         self.orders = data.orders
+        self.branch_tolerance = branch_tolerance
         self._linear_key = None
         self._linear = None
 
@@ -160,6 +165,33 @@ class SteppedSinePredictor:
             self._linear = build_linear(model, f_max_hz=self.settings["f_max_hz"])
             self._linear_key = key
         return self._linear
+
+    def _follow(self, pb, row: int, F: np.ndarray, X, factor: np.ndarray, H_row: np.ndarray):
+        """Solve one step, on the branch the test was on.
+
+        The step starts from the previous step's solution, as the test's rig did. Where the
+        fundamental then misses the measurement by more than ``branch_tolerance`` (relative), a
+        second start from the linear response may find the other branch of a bistable region;
+        the solution closer to the measured FRFs is taken: a test under force control can jump
+        earlier or later than a model driven by the recorded forces (the shaker's voltage drive
+        has its own fold).
+        """
+        w = 2 * np.pi * self.data.frequency_hz[row]
+        p = solve_steps(pb, [w], F[:, None], X0=X).points[0]
+        if X is None or not np.all(np.isfinite(H_row[:, 0])):
+            return p
+
+        def miss(q):
+            if not q.converged:
+                return np.inf
+            model = q.outputs().T * factor
+            return float(np.max(np.abs(model[:, 0] - H_row[:, 0]) / np.abs(H_row[:, 0])))
+
+        m0 = miss(p)
+        if m0 <= self.branch_tolerance:
+            return p
+        alt = solve_steps(pb, [w], F[:, None]).points[0]
+        return alt if miss(alt) < m0 else p
 
     def predict(
         self,
@@ -199,20 +231,23 @@ class SteppedSinePredictor:
         orders = np.array([float(o) for o in self.orders])
         sign = np.array(self._out_sign)[:, None]
         power = np.array(self._power)[:, None]
+        H_meas, _ = self.measured()
         for sweep in sweeps_of(d):
             if not need[sweep].any():
                 continue
             last = sweep[np.flatnonzero(need[sweep]).max()]
             sweep = sweep[: np.flatnonzero(sweep == last)[0] + 1]
             F = self._force_sign * d.force[sweep]
-            res = solve_steps(pb, 2 * np.pi * d.frequency_hz[sweep], F[:, :, None])
-            for j, (row, p) in enumerate(zip(sweep, res.points, strict=True)):
+            X = None
+            for j, row in enumerate(sweep):
+                wk = 2 * np.pi * d.frequency_hz[row] * orders  # (H,)
+                factor = sign * (1j * wk[None, :]) ** power / F[j][None, :] * self._force_sign
+                p = self._follow(pb, row, F[j], X, factor, H_meas[row])
                 conv[row] = p.converged
                 if not p.converged:
                     msgs.append(f"step {row} ({d.frequency_hz[row]:.3f} Hz): {p.message}")
                     continue
-                wk = 2 * np.pi * d.frequency_hz[row] * orders  # (H,)
-                factor = sign * (1j * wk[None, :]) ** power / F[j][None, :] * self._force_sign
+                X = p.X
                 frf[row] = p.outputs().T * factor
                 if params and need[row]:
                     sens = point_sensitivities(pb, p, list(params))
