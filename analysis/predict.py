@@ -3,8 +3,9 @@
 The analytical multi-harmonic FRFs are computed as the paper prescribes: the model is driven by
 the *measured* force phasors of every step, in the measured order of the steps (each sweep warm-
 starts from its previous step), at the realised frequencies; where a bistable region lets the
-model sit on another branch than the test did, the branch the measurement supports is taken; the model's response is taken in each channel's quantity (acceleration phasors are
-``-(k w)^2`` times displacement phasors) and divided by the measured force, like the measured FRF.
+model sit on another branch than the test did, the branch the measurement supports is taken.
+The model's response is taken in each channel's quantity (acceleration phasors are ``-(k w)^2``
+times displacement phasors) and divided by the measured force, like the measured FRF.
 Sensor masses from the file's channel table are part of the model.
 """
 
