@@ -2,8 +2,15 @@
 
 Commands
 --------
+run         run a stepped-sine plan (``rig run paper --backend sim --out run.h5``)
+linear      run the low-level random test (``rig linear --backend sim --out linear.h5``)
+export-uff  export a measurement file's FRFs to UFF 58 (``rig export-uff run.h5 out.uff``)
+plans       list the built-in plans
 backends    list the DAQ backends and check that each can be opened here
+workflow    the paper's whole workflow on a backend (simulated by default)
 amplifier   talk to the serial power amplifier (status, enable, mute, gain, clear)
+
+Every command has ``--help``.
 """
 
 from __future__ import annotations
@@ -15,6 +22,7 @@ import sys
 
 from rig.backends import available_backends, open_backend
 from rig.backends.protocol import BackendError
+from rig.cli_run import EXIT_INTERRUPTED, EXIT_USAGE, add_run_commands
 
 
 def cmd_backends(args) -> dict:
@@ -82,7 +90,41 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--timeout", type=float, default=1.0, help="reply timeout [s]")
     sp.add_argument("--json", action="store_true", help="print one JSON object")
     sp.set_defaults(func=cmd_amplifier)
+    add_run_commands(sub)
+
+    sp = sub.add_parser(
+        "workflow",
+        help="the paper's whole workflow (random test to validated model) into one folder",
+        description="Random test, linear calibration, pretest planning, the stepped-sine run "
+        "under force control, nonlinear calibration, cross-validation, validation and a report, "
+        "each stage the command a user would type; summary.md compares with the paper.",
+    )
+    sp.add_argument("--out", default="demo-output", help="output folder (default demo-output)")
+    sp.add_argument("--backend", choices=("sim", "ni"), default="sim")
+    sp.add_argument("--truth", default="reference", help="simulated rig: truth structure")
+    sp.add_argument("--seed", type=int, default=1, help="simulated rig: noise seed")
+    sp.add_argument("--starts", type=int, default=100, help="Latin hypercube starts")
+    sp.add_argument("--json", action="store_true", help="print one JSON object")
+    sp.set_defaults(func=cmd_workflow)
     return p
+
+
+def cmd_workflow(args) -> dict:
+    from rig.workflow import run_workflow
+
+    summary = run_workflow(
+        args.out,
+        backend=args.backend,
+        truth=args.truth,
+        seed=args.seed,
+        starts=args.starts,
+        quiet=args.json,
+    )
+    return {
+        "folder": str(args.out),
+        "calibration": summary["calibration"]["parameters"],
+        "validation_passed": summary["validation"]["passed"],
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -93,9 +135,14 @@ def main(argv: list[str] | None = None) -> int:
     )
     try:
         result = args.func(args)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except (OSError, ValueError, RuntimeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_USAGE
+    if isinstance(result, int):
+        return result
     if args.json:
         print(json.dumps(result))
     return 0

@@ -1,0 +1,291 @@
+"""The run commands of ``python -m rig``: run, linear, export-uff, plans.
+
+``run`` and ``linear`` take the device lock, open the backend (``--backend sim`` passes
+``--truth``, ``--seed`` and ``--realtime`` to the simulated rig), run the plan with progress on
+stderr, and print a one-screen summary on stdout. Ctrl-C (or SIGTERM) stops a run cleanly:
+the output ramps to 0 V, every completed step stays in the file, and ``--resume FILE`` finishes
+it later. Exit status: 0 success, 1 the run ended early (aborted or failed; the file says why),
+2 a usage or setup error, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import sys
+from pathlib import Path
+from typing import Any, TextIO
+
+from rig.events import (
+    Event,
+    FaultRaised,
+    PretestFinished,
+    RecordAcquired,
+    RunPaused,
+    RunResumed,
+    RunWarning,
+    StepFinished,
+)
+
+__all__ = ["ProgressPrinter", "add_run_commands"]
+
+EXIT_OK, EXIT_RUN_ENDED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+class UsageError(ValueError):
+    """The command line asks for something inconsistent (exit status 2)."""
+
+
+class ProgressPrinter:
+    """Prints run events to a stream: a rewritten progress line on a terminal, one line per
+    step otherwise (logs, pipes, a parent process reading them)."""
+
+    def __init__(self, stream: TextIO | None = None, quiet: bool = False) -> None:
+        self.stream = stream or sys.stderr
+        self.quiet = quiet
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self._open_line = False
+
+    def _line(self, text: str, transient: bool = False) -> None:
+        if self.tty and transient:
+            self.stream.write("\r" + text[:119].ljust(119))
+            self._open_line = True
+        else:
+            if self._open_line:
+                self.stream.write("\n")
+                self._open_line = False
+            self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def __call__(self, event: Event) -> None:
+        if isinstance(event, StepFinished):
+            if self.quiet:
+                return
+            r, c = event.record, event.control
+            its = c.iterations if c is not None else r.control_iterations
+            flag = "ok" if r.control_converged else "NOT CONVERGED"
+            n = f"{event.n_done}/{event.n_steps}" if event.n_steps else str(event.n_done)
+            bar = _bar(event.n_done, event.n_steps)
+            self._line(
+                f"step {n} {bar} plan {r.plan_index:3d}: {abs(r.force[0]):6.3f} N at "
+                f"{r.frequency_hz:8.4f} Hz, {its} it, error {r.control_error:.2%} {flag}",
+                transient=True,
+            )
+        elif isinstance(event, RecordAcquired):
+            if not self.quiet:
+                self._line(
+                    f"record {event.index + 1}/{event.n_records} ({event.purpose})", transient=True
+                )
+        elif isinstance(event, PretestFinished):
+            if not self.quiet:
+                self._line("pretest:")
+                for line in event.report.summary():
+                    self._line(line)
+        elif isinstance(event, RunWarning):
+            self._line(f"warning: {event.message}")
+        elif isinstance(event, FaultRaised):
+            self._line(f"{'paused' if event.paused else 'fault'}: {event.message}")
+        elif isinstance(event, RunPaused):
+            self._line(f"paused: {event.reason}")
+        elif isinstance(event, RunResumed):
+            self._line("resumed")
+
+    def close(self) -> None:
+        if self._open_line:
+            self.stream.write("\n")
+            self.stream.flush()
+            self._open_line = False
+
+
+def _bar(done: int, total: int, width: int = 20) -> str:
+    if not total:
+        return ""
+    k = min(width, round(width * done / total))
+    return "[" + "#" * k + "." * (width - k) + "]"
+
+
+# ------------------------------------------------------------------------ commands
+
+
+def _backend_options(args, setup) -> dict[str, Any]:
+    if args.backend != "sim":
+        for flag, value in (("--truth", args.truth), ("--seed", args.seed)):
+            if value is not None:
+                raise UsageError(f"{flag} applies to --backend sim only")
+        if args.realtime:
+            raise UsageError("--realtime applies to --backend sim only")
+        return {}
+    options: dict[str, Any] = {"truth": args.truth or "reference"}
+    if args.seed is not None:
+        options["seed"] = args.seed
+    if args.realtime:
+        options["realtime"] = True
+    options["sensor_masses_kg"] = setup.sensor_masses_kg()
+    return options
+
+
+def _run(args, kind: str) -> int:
+    from rig.plans import load_plan
+    from rig.runner import TestRun, open_rig
+    from rig.safety import interrupt_handlers
+    from rig.setup import load_setup
+
+    resume = getattr(args, "resume", None)
+    plan = load_plan(args.plan) if args.plan else None
+    if plan is not None and plan.kind != kind:
+        other = "linear" if plan.kind == "random" else "run"
+        raise UsageError(f"plan {plan.name!r} is a {plan.kind} plan; use 'rig {other}'")
+    setup = load_setup(args.setup) if args.setup else None
+    if resume:
+        from analysis.measurement_file import read_measurement
+        from rig.setup import setup_from_dict
+
+        stored = read_measurement(resume)
+        setup = setup or setup_from_dict(stored.setup, f"setup stored in {resume}")
+        out = Path(resume)
+        before = stored.config.get("run", {}) if isinstance(stored.config, dict) else {}
+        if before.get("backend") == args.backend == "sim":  # the same simulated rig as before
+            previous = before.get("backend_options", {})
+            if args.truth is None and isinstance(previous.get("truth"), str):
+                args.truth = previous["truth"]
+            if args.seed is None and isinstance(previous.get("seed"), int):
+                args.seed = previous["seed"]
+    else:
+        if plan is None:
+            raise UsageError("name a plan (see 'rig plans') or give --resume FILE")
+        setup = setup or load_setup(plan.setup)
+        out = Path(args.out)
+    options = _backend_options(args, setup)
+    if not getattr(args, "verbose", False):
+        logging.getLogger("rig").setLevel(logging.ERROR)  # the progress printer shows warnings
+    info = {"backend": args.backend, "backend_options": _jsonable(options), "argv": sys.argv[1:]}
+    printer = ProgressPrinter(quiet=args.quiet)
+    with open_rig(
+        args.backend,
+        setup,
+        backend_options=options,
+        lock_dir=args.lock_dir,
+        amplifier_port=args.amplifier_port,
+    ) as rig:
+        common = {"amplifier": rig.amplifier, "run_info": info}
+        if resume:
+            run = TestRun.resume(rig.backend, out, plan=plan, setup=setup, **common)
+        else:
+            run = TestRun(rig.backend, plan, setup, out, overwrite=args.overwrite, **common)
+        run.engine.bus.subscribe(printer)
+        with interrupt_handlers(run.engine.abort):
+            summary = run.execute()
+    printer.close()
+    if args.json:
+        print(json.dumps(_summary_json(summary)))
+    else:
+        print("\n".join(summary.lines()))
+    if summary.interrupted:
+        return EXIT_INTERRUPTED
+    return EXIT_OK if summary.status == "success" else EXIT_RUN_ENDED
+
+
+def _jsonable(options: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in options.items() if k != "sensor_masses_kg"}
+
+
+def _summary_json(summary) -> dict[str, Any]:
+    d = {k: getattr(summary, k) for k in summary.__dataclass_fields__}
+    d["path"] = str(d["path"])
+    return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in d.items()}
+
+
+def cmd_run(args) -> int:
+    return _run(args, "stepped-sine")
+
+
+def cmd_linear(args) -> int:
+    return _run(args, "random")
+
+
+def cmd_export_uff(args) -> int:
+    from rig.export_uff import export_uff
+
+    n = export_uff(args.file, args.uff, overwrite=args.overwrite)
+    if args.json:
+        print(json.dumps({"file": str(args.uff), "sets": n}))
+    else:
+        print(f"{n} FRF sets written to {args.uff}")
+    return EXIT_OK
+
+
+def cmd_plans(args) -> int:
+    from rig.plans import builtin_plans, describe_plan, load_plan
+
+    rows = {}
+    for name, path in sorted(builtin_plans().items()):
+        plan = load_plan(name)
+        rows[name] = {"kind": plan.kind, "summary": describe_plan(plan), "file": str(path)}
+    if args.json:
+        print(json.dumps(rows))
+    else:
+        for name, row in rows.items():
+            print(f"{name:8s} {row['summary']}")
+    return EXIT_OK
+
+
+def _add_rig_options(sp: argparse.ArgumentParser, default_out: str) -> None:
+    sp.add_argument(
+        "--backend", choices=("sim", "ni"), default="sim", help="DAQ backend (default sim)"
+    )
+    sp.add_argument("--out", default=default_out, help=f"measurement file (default {default_out})")
+    sp.add_argument("--setup", help="lab setup: built-in name or TOML file (default: the plan's)")
+    sp.add_argument(
+        "--truth", help="simulated rig: truth structure name or file (default reference)"
+    )
+    sp.add_argument("--seed", type=int, help="simulated rig: noise seed")
+    sp.add_argument("--realtime", action="store_true", help="simulated rig: pace to the clock")
+    sp.add_argument("--amplifier-port", help="serial port of the amplifier (overrides the setup)")
+    sp.add_argument("--lock-dir", help="directory of the device locks")
+    sp.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    sp.add_argument("--quiet", action="store_true", help="no per-step progress")
+    sp.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+
+
+def add_run_commands(sub) -> None:
+    """Add run, linear, export-uff and plans to the ``rig`` parser's subcommands."""
+    sp = sub.add_parser(
+        "run",
+        help="run a stepped-sine plan",
+        description="Run a force-controlled stepped multi-sine plan (built-in name or TOML file) "
+        "and write every step to the measurement file as it completes. Ctrl-C stops cleanly; "
+        "--resume FILE completes an unfinished file.",
+    )
+    sp.add_argument("plan", nargs="?", help="plan name (see 'rig plans') or plan file")
+    sp.add_argument("--resume", metavar="FILE", help="complete the unfinished run in FILE")
+    _add_rig_options(sp, "run.h5")
+    sp.set_defaults(func=cmd_run)
+
+    sp = sub.add_parser(
+        "linear",
+        help="run the low-level random test (H1, coherence)",
+        description="Run a random-excitation plan (default 'linear': all points, low level) and "
+        "write H1 and coherence of every channel to a kind='random' measurement file.",
+    )
+    sp.add_argument("plan", nargs="?", default="linear", help="random plan (default linear)")
+    _add_rig_options(sp, "linear.h5")
+    sp.set_defaults(func=cmd_linear)
+
+    sp = sub.add_parser(
+        "export-uff",
+        help="export the FRFs of a measurement file to UFF 58",
+        description="Write the FRFs of a measurement file as UFF dataset 58 records: for a "
+        "stepped-sine run H^nu of every channel per order, level and sweep direction; for a "
+        "random run the H1 of every channel.",
+    )
+    sp.add_argument("file", help="measurement file (.h5)")
+    sp.add_argument("uff", help="UFF file to write")
+    sp.add_argument("--overwrite", action="store_true", help="replace an existing UFF file")
+    sp.add_argument("--json", action="store_true", help="print one JSON object")
+    sp.set_defaults(func=cmd_export_uff)
+
+    sp = sub.add_parser("plans", help="list the built-in plans")
+    sp.add_argument("--json", action="store_true", help="print one JSON object")
+    sp.set_defaults(func=cmd_plans)

@@ -1,0 +1,474 @@
+"""Checks on every block read, and keeping Ctrl-C from interrupting a ramp-down.
+
+:class:`SignalChecks` is what the engine runs on the data as they arrive:
+
+- input range: a sample at a channel's ADC range means the channel clipped (fault ``clipping``);
+- response limits (:class:`rig.plans.ResponseLimit`): peak acceleration or force of every block,
+  and peak displacement (acceleration integrated twice over the excited band); an alarm warns
+  once per step, an abort ends the run (fault ``response-limit``);
+- after each averaged measurement: a flat channel (every sample equal) or one whose fundamental
+  is at its noise level (below ``SILENT_SNR`` standard errors) in ``SILENT_STRIKES`` measurements
+  in a row while the drive is on, its response per newton having fallen to a fifth of what it
+  was (``SILENT_DROP``) (fault ``sensor``; on the drive-force channel, one measurement at the
+  noise level: ``no-force``); a live sensor that responds weakly (an antiresonance, a low
+  level) stays where it was from step to step, a dead one drops to its noise;
+  and a waveform flat-topped at both peaks, the mark of a saturated sensor (``clipping``).
+
+Process-level safety: :func:`deferred_interrupts` holds Ctrl-C while the output ramps down or a
+step is written; :func:`interrupt_handlers` turns Ctrl-C and SIGTERM into a clean abort of a
+running engine (a second Ctrl-C interrupts at once).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import signal
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+import numpy as np
+
+from rig.faults import RunFault
+from rig.plans import Limits
+
+__all__ = [
+    "ResolvedLimit",
+    "SignalChecks",
+    "deferred_interrupts",
+    "displacement_peak",
+    "interrupt_handlers",
+    "plateau_fraction",
+    "resolve_limits",
+]
+
+logger = logging.getLogger(__name__)
+
+SILENT_SNR = 3.0  # a fundamental below this many noise standard errors is "no response"
+SILENT_STRIKES = 2  # consecutive silent measurements before a channel counts as dead
+SILENT_DROP = 0.2  # ... and only if its response per newton fell below this share of before
+PLATEAU_RATIO = 1.8  # flat at both peaks this many times longer than a sine: saturated
+_PLATEAU_HARMONICS = 20  # harmonics of the base kept to denoise the period average
+
+
+def _describe(channel) -> str:
+    extra = f", serial {channel.serial}" if getattr(channel, "serial", "") else ""
+    if channel.quantity == "voltage":
+        return f"channel {channel.name!r}{extra}"
+    return f"channel {channel.name!r} (point {channel.point} {channel.direction}{extra})"
+
+
+@dataclass(frozen=True)
+class ResolvedLimit:
+    """One limit on one acquired channel.
+
+    Attributes
+    ----------
+    column : int
+        Channel column.
+    quantity : {"peak", "displacement"}
+        ``peak``: the channel's own peak (acceleration or force); ``displacement``: the
+        twice-integrated acceleration.
+    alarm, abort : float or None
+        Limits in channel units (peak) or m (displacement).
+    unit : str
+    """
+
+    column: int
+    quantity: str
+    alarm: float | None
+    abort: float | None
+    unit: str
+
+
+def resolve_limits(limits: Limits, channels: Sequence) -> list[ResolvedLimit]:
+    """Attach the plan's response limits to the acquired channels.
+
+    Raises
+    ------
+    ValueError
+        If a limit names a channel or point that is not acquired, or a limit that does not fit
+        the channel's quantity (displacement of a force channel).
+    """
+    names = [c.name for c in channels]
+    out = []
+    for i, lim in enumerate(limits.response):
+        where = f"limits.response[{i}] ({lim.target})"
+        if lim.channel:
+            if lim.channel not in names:
+                raise ValueError(f"{where}: channel not acquired by this plan (channels {names})")
+            col = names.index(lim.channel)
+        else:
+            cols = [
+                j
+                for j, c in enumerate(channels)
+                if c.point == lim.point and c.quantity == "acceleration"
+            ]
+            if not cols:
+                raise ValueError(f"{where}: no acceleration channel at that point in {names}")
+            col = cols[0]
+        ch = channels[col]
+        accel = (lim.acceleration_alarm_m_s2, lim.acceleration_abort_m_s2)
+        disp = (lim.displacement_alarm_m, lim.displacement_abort_m)
+        force = (lim.force_alarm_n, lim.force_abort_n)
+        if ch.quantity != "acceleration" and any(v is not None for v in accel + disp):
+            raise ValueError(f"{where}: acceleration limits on the {ch.quantity} channel {ch.name}")
+        if ch.quantity != "force" and any(v is not None for v in force):
+            raise ValueError(f"{where}: force limits on the {ch.quantity} channel {ch.name}")
+        for pair, quantity, unit in ((accel, "peak", "m/s^2"), (force, "peak", "N")):
+            if any(v is not None for v in pair):
+                out.append(ResolvedLimit(col, quantity, pair[0], pair[1], unit))
+        if any(v is not None for v in disp):
+            out.append(ResolvedLimit(col, "displacement", disp[0], disp[1], "m"))
+    return out
+
+
+def displacement_peak(
+    acceleration: np.ndarray, sample_rate_hz: float, band_hz, periodic: bool = True
+) -> np.ndarray:
+    """Peak displacement from acceleration, integrated twice over a band.
+
+    Parameters
+    ----------
+    acceleration : ndarray, shape (n,) or (n, C), m/s^2
+    sample_rate_hz : float
+    band_hz : (float, float)
+        Frequencies kept [Hz]; outside it (drift, noise) is dropped.
+    periodic : bool
+        The record holds whole periods of the excitation. If not, it is tapered (Tukey window,
+        25 %) so that the jump between its ends does not leak into the band; the peak is then
+        an estimate.
+
+    Returns
+    -------
+    ndarray, shape () or (C,), m
+        ``max |d(t)|`` with ``D(f) = -A(f) / (2 pi f)^2`` on the record's DFT grid (exact for a
+        record of whole periods of a periodic signal in the band).
+    """
+    a = np.asarray(acceleration, dtype=float)
+    n = a.shape[0]
+    if not periodic:
+        a = a - a.mean(axis=0)
+        taper = _tukey(n, 0.25)
+        a = a * (taper[:, None] if a.ndim == 2 else taper)
+    spectrum = np.fft.rfft(a, axis=0)
+    f = np.fft.rfftfreq(n, 1.0 / sample_rate_hz)
+    keep = (f >= band_hz[0]) & (f <= band_hz[1]) & (f > 0)
+    d = np.zeros_like(spectrum)
+    w2 = (2.0 * np.pi * f[keep]) ** 2
+    d[keep] = -spectrum[keep] / (w2[:, None] if a.ndim == 2 else w2)
+    return np.max(np.abs(np.fft.irfft(d, n, axis=0)), axis=0)
+
+
+def _tukey(n: int, alpha: float) -> np.ndarray:
+    w = np.ones(n)
+    edge = int(alpha * n / 2)
+    if edge > 0:
+        ramp = 0.5 * (1 - np.cos(np.pi * np.arange(edge) / edge))
+        w[:edge] = ramp
+        w[n - edge :] = ramp[::-1]
+    return w
+
+
+def plateau_fraction(period_waveform: np.ndarray, noise_rms: float) -> float:
+    """How much flatter than a sine a waveform is at both its peaks (saturation).
+
+    Parameters
+    ----------
+    period_waveform : ndarray, shape (N,)
+        One base period, averaged over periods and denoised.
+    noise_rms : float
+        Noise left in it (channel units).
+
+    Returns
+    -------
+    float
+        The smaller of the shares of samples within ``band = 1 % of the amplitude + 3
+        noise_rms`` of the maximum and of the minimum, over the share a sine spends there,
+        ``arccos(1 - band / amplitude) / pi``: about 1 for a sine, 2 for a sine saturated at
+        80 % of its amplitude, 3 at 50 %. 0 when the peaks are not symmetric (a saturated
+        sensor clips both ways at about the same level; the flat top of a nonlinear response
+        is one-sided); NaN when the band exceeds 15 % of the amplitude (too noisy to tell).
+    """
+    w = np.asarray(period_waveform, dtype=float)
+    hi, lo = float(np.max(w)), float(np.min(w))
+    amp = 0.5 * (hi - lo)
+    if amp <= 0:
+        return math.nan
+    band = 0.01 * amp + 3.0 * noise_rms
+    if band > 0.15 * amp:
+        return math.nan
+    if abs(hi + lo) > max(0.05 * amp, band):
+        return 0.0
+    top = float(np.mean(w >= hi - band))
+    bottom = float(np.mean(w <= lo + band))
+    sine = math.acos(1.0 - band / amp) / math.pi
+    return min(top, bottom) / sine
+
+
+class SignalChecks:
+    """Limit, clipping and sensor checks of one run.
+
+    Parameters
+    ----------
+    channels : sequence of rig.setup.ChannelSetup
+        Acquired channels in column order.
+    limits : Limits
+    sample_rate_hz : float
+    warn : callable(kind, message, channel)
+        Called for alarms (once per channel and limit per step).
+    """
+
+    def __init__(
+        self,
+        channels: Sequence,
+        limits: Limits,
+        sample_rate_hz: float,
+        warn: Callable[[str, str, str], None],
+    ) -> None:
+        self.channels = tuple(channels)
+        self.limits = resolve_limits(limits, self.channels)
+        self.sample_rate_hz = float(sample_rate_hz)
+        self._range = np.array([c.range_units for c in self.channels]) * (1.0 - 1e-6)
+        self._warn = warn
+        self._alarmed: set[tuple[int, str]] = set()
+        self._silent = np.zeros(len(self.channels), dtype=int)
+        self._reference = np.full(len(self.channels), np.nan)  # last |X_1 / F_1| when live
+        self.context = ""  # "at 25.3 Hz, 4 N": appended to messages
+
+    def new_step(self, context: str) -> None:
+        """Forget the alarms given (they warn again in the new step)."""
+        self._alarmed.clear()
+        self.context = context
+
+    def _where(self) -> str:
+        return f" {self.context}" if self.context else ""
+
+    # -- every block ------------------------------------------------------------------------
+    def check_block(
+        self, data: np.ndarray, band_hz: tuple[float, float] | None, periodic: bool = True
+    ) -> None:
+        """Check samples as they are read.
+
+        Parameters
+        ----------
+        data : ndarray, shape (n, C), channel units
+        band_hz : (float, float), optional
+            Excited band for the displacement limits (None: skip them, e.g. at 0 V).
+        periodic : bool
+            ``data`` holds whole periods of the drive (see :func:`displacement_peak`).
+
+        Raises
+        ------
+        RunFault
+            ``clipping`` when a channel reaches its input range; ``response-limit`` when an
+            abort limit is exceeded.
+        """
+        if data.size == 0:
+            return
+        peaks = np.max(np.abs(data), axis=0)
+        over = np.flatnonzero(peaks >= self._range)
+        if over.size:
+            ch = self.channels[int(over[0])]
+            raise RunFault(
+                "clipping",
+                f"{_describe(ch)} reached its input range (+-{ch.range_v:g} V = "
+                f"+-{ch.range_units:.4g} {ch.unit}){self._where()}: the signal is clipped; "
+                f"raise the channel's range_v in the setup or lower the level",
+                ch.name,
+            )
+        for lim in self.limits:
+            if lim.quantity == "peak":
+                value = float(peaks[lim.column])
+            elif band_hz is None or data.shape[0] < 8:
+                continue
+            else:
+                acc = data[:, lim.column]
+                value = float(displacement_peak(acc, self.sample_rate_hz, band_hz, periodic))
+            self._compare(lim, value)
+
+    def _compare(self, lim: ResolvedLimit, value: float) -> None:
+        ch = self.channels[lim.column]
+        what = "displacement" if lim.quantity == "displacement" else f"peak {ch.quantity}"
+        if lim.abort is not None and value > lim.abort:
+            raise RunFault(
+                "response-limit",
+                f"{_describe(ch)}: {what} {value:.4g} {lim.unit} exceeded the abort limit "
+                f"{lim.abort:.4g} {lim.unit}{self._where()}",
+                ch.name,
+            )
+        key = (lim.column, lim.quantity)
+        if lim.alarm is not None and value > lim.alarm and key not in self._alarmed:
+            self._alarmed.add(key)
+            self._warn(
+                "response-alarm",
+                f"{_describe(ch)}: {what} {value:.4g} {lim.unit} above the alarm limit "
+                f"{lim.alarm:.4g} {lim.unit}{self._where()}",
+                ch.name,
+            )
+
+    # -- every averaged measurement ---------------------------------------------------------
+    def check_measurement(
+        self,
+        estimate,
+        window: np.ndarray,
+        samples_per_period: int,
+        fundamental_index: int,
+        drive_v: float,
+    ) -> None:
+        """Check an averaged multi-sine measurement for flat, silent and saturated channels.
+
+        Parameters
+        ----------
+        estimate : HarmonicEstimate
+        window : ndarray, shape (n, C)
+            The averaged samples (whole base periods).
+        samples_per_period : int
+        fundamental_index : int
+            Column of order 1.
+        drive_v : float
+            Fundamental drive amplitude [V] (for the message).
+
+        Raises
+        ------
+        RunFault
+            ``sensor``, ``no-force`` or ``clipping``.
+        """
+        n_total = window.shape[0]
+        spread = np.ptp(window, axis=0)
+        forces = [c for c, ch in enumerate(self.channels) if ch.role == "drive-force"]
+        force = abs(estimate.phasors[forces[0], fundamental_index]) if forces else math.nan
+        freq = estimate.frequencies_hz[fundamental_index]
+        for c, ch in enumerate(self.channels):
+            if ch.quantity == "voltage":
+                continue
+            if spread[c] == 0:
+                raise RunFault(
+                    "sensor",
+                    f"{_describe(ch)} is flat (every sample {window[0, c]:.4g} {ch.unit})"
+                    f"{self._where()}: the sensor or its input is dead; check the sensor, its "
+                    "cable and the IEPE supply",
+                    ch.name,
+                )
+            amp = abs(estimate.phasors[c, fundamental_index])
+            noise = 2.0 * estimate.nonperiodic_rms[c] / math.sqrt(n_total)
+            silent = bool(np.isfinite(noise) and amp < SILENT_SNR * noise)
+            ratio = amp / force if force > 0 else math.nan
+            if silent and ch.role != "drive-force" and ratio >= SILENT_DROP * self._reference[c]:
+                silent = False  # weak but where it was before: an antiresonance, not a dead sensor
+            if not silent and np.isfinite(ratio):
+                self._reference[c] = ratio
+            self._silent[c] = self._silent[c] + 1 if silent else 0
+            # the force gauge has no antiresonance to dip into: one silent measurement is enough
+            strikes = 1 if ch.role == "drive-force" else SILENT_STRIKES
+            if self._silent[c] >= strikes:
+                self._silent[c] = 0
+                if ch.role == "drive-force":
+                    raise RunFault(
+                        "no-force",
+                        f"no force at the drive point: {_describe(ch)} reads {amp:.3g} N at "
+                        f"{freq:.4g} Hz with {drive_v:.3g} V drive, the level of its noise "
+                        f"({noise:.2g} N){self._where()}; the amplifier is off, muted or has "
+                        "tripped (overload), or the shaker is not connected",
+                        ch.name,
+                    )
+                raise RunFault(
+                    "sensor",
+                    f"{_describe(ch)} stopped responding: its fundamental is {amp:.3g} {ch.unit} "
+                    f"at {freq:.4g} Hz, the level of its noise ({noise:.2g} {ch.unit})"
+                    f"{self._where()}; the sensor or its cable is disconnected (IEPE open "
+                    "circuit?)",
+                    ch.name,
+                )
+        self._check_saturation(window, samples_per_period, estimate)
+
+    def _check_saturation(self, window: np.ndarray, n: int, estimate) -> None:
+        periods = window.shape[0] // n
+        if periods < 1:
+            return
+        mean_period = window[: periods * n].reshape(periods, n, -1).mean(axis=0)
+        spectrum = np.fft.rfft(mean_period, axis=0)
+        keep = min(_PLATEAU_HARMONICS, spectrum.shape[0] - 1)
+        spectrum[keep + 1 :] = 0.0
+        spectrum[0] = 0.0
+        smooth = np.fft.irfft(spectrum, n, axis=0)
+        residual = estimate.nonperiodic_rms * math.sqrt(2.0 * keep / n) / math.sqrt(periods)
+        for c, ch in enumerate(self.channels):
+            if ch.quantity == "voltage":
+                continue
+            ratio = plateau_fraction(smooth[:, c], float(np.nan_to_num(residual[c])))
+            if ratio > PLATEAU_RATIO:
+                level = 0.5 * float(np.ptp(smooth[:, c]))
+                raise RunFault(
+                    "clipping",
+                    f"{_describe(ch)} is flat-topped at about +-{level:.3g} {ch.unit} "
+                    f"({ratio:.1f} x as long at its peaks as a sine){self._where()}: the sensor "
+                    "saturates (its measuring range is exceeded); use a less sensitive sensor or "
+                    "lower the level",
+                    ch.name,
+                )
+
+
+# ------------------------------------------------------------------------ signals
+
+
+@contextmanager
+def deferred_interrupts() -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT) while the body runs; deliver it afterwards.
+
+    Used around the ramp-down and file writes so that an impatient second Ctrl-C cannot cut
+    them short. Outside the main thread (where Python delivers signals) it does nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+
+    def hold(signum, frame) -> None:
+        received.append(signum)
+        logger.warning("Ctrl-C held until the output is safe")
+
+    try:
+        previous = signal.signal(signal.SIGINT, hold)
+    except ValueError:  # not the main interpreter
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if received and callable(previous):
+            previous(signal.SIGINT, None)
+
+
+@contextmanager
+def interrupt_handlers(abort: Callable[[str], None]) -> Iterator[None]:
+    """Turn Ctrl-C and SIGTERM into ``abort(reason)`` for the duration of a run.
+
+    The first Ctrl-C asks for a clean abort (the engine ramps the output down and records the
+    run as aborted); a second one raises ``KeyboardInterrupt`` at once (the engine's cleanup
+    still ramps down). SIGTERM asks for a clean abort. Only in the main thread.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    count = [0]
+
+    def on_int(signum, frame) -> None:
+        count[0] += 1
+        if count[0] > 1:
+            raise KeyboardInterrupt
+        abort("interrupted by the user (Ctrl-C)")
+
+    def on_term(signum, frame) -> None:
+        abort("terminated by a signal (SIGTERM)")
+
+    old_int = signal.signal(signal.SIGINT, on_int)
+    old_term = signal.signal(signal.SIGTERM, on_term)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old_int)
+        signal.signal(signal.SIGTERM, old_term)

@@ -1,0 +1,242 @@
+"""Plans: the built-in plans, validation, and the procedures tested by recording their commands."""
+
+import dataclasses
+import json
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from rig.commands import (
+    Acquire,
+    AcquireRecords,
+    BeginStep,
+    Notify,
+    SetDrive,
+    SetWaveform,
+    WriteRandom,
+    WriteStep,
+)
+from rig.events import ControlIteration, PretestFinished
+from rig.faults import RunFault
+from rig.plans import builtin_plans, describe_plan, load_plan, plan_from_dict
+from rig.run_random import random_procedure
+from rig.run_stepped import stepped_sine_procedure
+from rig.tomlconfig import ConfigError
+from tests.rig.rig_helpers import RecordingRig, context, reduced_plan, setup_at
+
+
+def test_builtin_plans():
+    assert {"paper", "quick", "linear"} <= set(builtin_plans())
+    for name in builtin_plans():
+        plan = load_plan(name)
+        assert plan.name == name and describe_plan(plan)
+        assert plan_from_dict(json.loads(json.dumps(plan.to_dict()))) == plan
+
+
+def test_paper_plan_is_the_papers_test():
+    plan = load_plan("paper")
+    f = plan.frequencies.frequencies_hz()
+    assert f.size == 56 and f[0] == 21.0 and f[-1] == 40.0
+    assert np.count_nonzero((f >= 24) & (f <= 28)) == 41
+    assert len(set(np.round(f, 6))) == 56  # overlaps (24, 25, 26, 27, 28 Hz) measured once
+    assert plan.levels_n == (2.0, 4.0, 6.0, 8.0)
+    assert plan.excitation.orders == (Fraction(1), Fraction(2), Fraction(3))
+    assert plan.excitation.relative_amplitudes == (1.0, 0.02, 0.02)
+    assert plan.points == (3, 6, 7) and plan.setup == "reference"
+    steps = plan.steps()
+    assert len(steps) == plan.n_steps == 224
+    assert [s.plan_index for s in steps] == list(range(224))
+    assert [s.level_n for s in steps[:56]] == [2.0] * 56
+    assert [s.frequency_hz for s in steps[:56]] == list(f)
+    assert steps[56].first_of_sweep and steps[56].level_index == 1
+    assert all(s.sweep_direction == 1 for s in steps)
+    targets = plan.force_targets()
+    assert targets.shape == (4, 3) and np.allclose(np.abs(targets[3]), [8.0, 0.16, 0.16])
+    # the controller keeps its default tolerances; the plan's drive limit is its max_drive_v
+    s = plan.control.settings
+    assert (s.fundamental_amplitude_tolerance, s.harmonic_tolerance) == (0.01, 0.10)
+    assert s.max_drive_v == plan.limits.drive_peak_v < load_plan("paper").limits.drive_peak_v + 1
+    assert {(r.point, r.channel) for r in plan.limits.response} == {(7, ""), (-1, "force3")}
+
+
+def test_linear_plan():
+    plan = load_plan("linear")
+    assert plan.kind == "random" and plan.points == tuple(range(1, 14))
+    assert (plan.excitation.f_lo_hz, plan.excitation.f_hi_hz) == (10.0, 200.0)
+    tip = plan.limits.response[0]
+    assert tip.point == 7 and tip.displacement_abort_m < 0.6e-3  # before the gap closes
+
+
+def test_up_down_sweeps():
+    plan = reduced_plan(levels_n=(2.0,), ranges=((21, 23, 1),))
+    plan = dataclasses.replace(
+        plan, frequencies=dataclasses.replace(plan.frequencies, direction="up-down")
+    )
+    steps = plan.steps()
+    assert [s.frequency_hz for s in steps] == [21, 22, 23, 23, 22, 21]
+    assert [s.sweep_direction for s in steps] == [1, 1, 1, -1, -1, -1]
+
+
+def _paper_dict():
+    return json.loads(json.dumps(load_plan("paper").to_dict()))
+
+
+@pytest.mark.parametrize(
+    "change, key",
+    [
+        (lambda d: d["excitation"].update(levels_n=[2.0, -4.0]), "excitation.levels_n[1]"),
+        (lambda d: d["excitation"].update(orders=[1, 2, 2]), "excitation.orders"),
+        (lambda d: d["excitation"].update(relative_amplitudes=[1.0, 0.02]), "excitation"),
+        (lambda d: d["frequencies"]["ranges"][0].update(stop_hz=40.5), "frequencies.ranges[0]"),
+        (lambda d: d["frequencies"].update(direction="sideways"), "frequencies.direction"),
+        (lambda d: d["acquisition"].update(average_blocks=2), "acquisition"),
+        (lambda d: d["acquisition"].update(avarage_blocks=16), "acquisition"),
+        (lambda d: d["control"].update(max_iterations=0), "control"),
+        (lambda d: d["control"].update(orders=[1]), "control.orders"),
+        (
+            lambda d: d["limits"]["response"][0].update(displacement_alarm_m=11e-3),
+            "limits.response[0]",
+        ),
+        (lambda d: d["limits"].update(drive_peak_v=0), "limits.drive_peak_v"),
+        (lambda d: d.update(points=[]), "points"),
+    ],
+)
+def test_plan_errors_name_the_key(change, key):
+    data = _paper_dict()
+    change(data)
+    with pytest.raises(ConfigError) as err:
+        plan_from_dict(data, "plan my.toml")
+    assert f"plan my.toml: {key}" in str(err.value)
+
+
+def test_own_plan_file(tmp_path):
+    text = (
+        (builtin_plans()["quick"]).read_text().replace("levels_n = [2.0, 8.0]", "levels_n = [3.0]")
+    )
+    path = tmp_path / "mine.toml"
+    path.write_text(text)
+    plan = load_plan(path)
+    assert plan.levels_n == (3.0,) and plan.n_steps == 5
+    with pytest.raises(ConfigError, match="not a built-in plan"):
+        load_plan(tmp_path / "missing.toml")
+
+
+# ------------------------------------------------------------------------ recorded procedures
+
+
+def _smooth_gain(f, orders):
+    """A drive-to-force gain that changes with frequency like a shaker on a structure."""
+    k = np.array([float(o) for o in orders])
+    return 40.0 / (1.0 + 0.3j * (k * f - 25.0) / 5.0)
+
+
+def test_stepped_procedure_commands_on_a_model_plant():
+    setup = setup_at()
+    plan = reduced_plan(levels_n=(2.0, 6.0), ranges=((22.0, 24.0, 0.5),))
+    rig = RecordingRig(context(setup, sample_rate_hz=5120.0), _smooth_gain)
+    commands = rig.run(stepped_sine_procedure(plan))
+    kinds = [type(c).__name__ for c in commands]
+    # pretest first: 0 V noise floor, then the low-level loop check at every order
+    assert kinds[:5] == ["SetDrive", "Acquire", "SetDrive", "Acquire", "Notify"]
+    assert not np.any(commands[0].drive_v) and not commands[1].check_signals
+    assert np.allclose(np.abs(commands[2].drive_v), plan.pretest.loop_check_drive_v)
+    assert isinstance(commands[4].event, PretestFinished) and commands[4].event.report.ok
+    begins = [c for c in commands if isinstance(c, BeginStep)]
+    assert [b.step.plan_index for b in begins] == list(range(plan.n_steps))
+    assert len(rig.steps) == plan.n_steps
+    for write in rig.steps:
+        r = write.record
+        target = plan.excitation.spec.force_targets(plan.levels_n[r.level_index])
+        assert np.max(np.abs(r.force - target)) <= 0.01 * abs(target[0])
+        assert r.control_converged and r.n_blocks == plan.acquisition.record_blocks
+        assert r.frequency_hz == pytest.approx(r.frequency_target_hz, rel=2e-3)
+    iterations = [w.record.control_iterations for w in rig.steps]
+    assert iterations[0] <= 2 and np.median(iterations) <= 2  # warm starts along the sweep
+    # each step: drives, acquisitions (the first with the long settling), then the record
+    first = commands.index(begins[1])
+    acquires = [c for c in commands[first:] if isinstance(c, Acquire)]
+    assert acquires[0].settle_periods == plan.acquisition.settle_periods
+    assert acquires[0].blocks == plan.acquisition.average_blocks
+    assert any(a.purpose == "record" and a.settle_periods == 0 for a in acquires)
+    iteration_events = [c.event for c in commands if isinstance(c, Notify)]
+    assert any(isinstance(e, ControlIteration) and e.accepted for e in iteration_events)
+
+
+def test_completed_steps_are_skipped():
+    setup = setup_at()
+    plan = reduced_plan(levels_n=(2.0,), ranges=((21.0, 25.0, 1.0),))
+    rig = RecordingRig(context(setup, sample_rate_hz=5120.0), _smooth_gain)
+    rig.run(stepped_sine_procedure(plan, completed={0, 1, 3}))
+    assert [w.record.plan_index for w in rig.steps] == [2, 4]
+    rig = RecordingRig(context(setup, sample_rate_hz=5120.0), _smooth_gain)
+    assert rig.run(stepped_sine_procedure(plan, completed=range(5))) == []
+
+
+def test_controller_learns_the_coupling_of_the_orders():
+    setup = setup_at()
+    plan = reduced_plan(levels_n=(4.0,), ranges=((21.0, 23.0, 1.0),))
+    rig = RecordingRig(context(setup, sample_rate_hz=5120.0), _smooth_gain, coupling=0.05)
+    rig.run(stepped_sine_procedure(plan))
+    for write in rig.steps:
+        assert write.record.control_converged
+        # the fundamental generates 0.2 N at orders 2 and 3; the drive cancels it
+        assert np.max(np.abs(write.record.force[1:] - 0.08)) <= 0.1 * 0.08 + 1e-9
+
+
+def test_wrong_polarity_makes_the_controller_diverge():
+    setup = setup_at()
+    plan = reduced_plan(levels_n=(2.0,), ranges=((21.0, 22.0, 1.0),))
+    settings = dataclasses.replace(plan.control.settings, max_gain_phase_change_deg=90.0)
+    plan = dataclasses.replace(
+        plan,
+        pretest=dataclasses.replace(plan.pretest, enabled=False),
+        control=dataclasses.replace(plan.control, settings=settings),
+    )
+    rig = RecordingRig(context(setup, sample_rate_hz=5120.0), _smooth_gain)
+    wrong = -_smooth_gain(21.0, plan.excitation.orders)
+    with pytest.raises(RunFault) as err:
+        rig.run(stepped_sine_procedure(plan, initial_gain=wrong))
+    assert err.value.kind == "control-diverged"
+    assert "diverged at 21 Hz, 2 N" in err.value.message and not rig.steps
+
+
+def test_random_procedure_commands():
+    setup = setup_at()
+    plan = load_plan("linear")
+    plan = dataclasses.replace(
+        plan,
+        excitation=dataclasses.replace(plan.excitation, record_s=1.0),
+        acquisition=dataclasses.replace(plan.acquisition, average_records=3),
+        pretest=dataclasses.replace(plan.pretest, noise_s=0.5),
+    )
+    rig = RecordingRig(context(setup, plan.points, 2560.0), _smooth_gain)
+    commands = rig.run(random_procedure(plan))
+    waves = [c for c in commands if isinstance(c, SetWaveform)]
+    records = [c for c in commands if isinstance(c, AcquireRecords)]
+    assert [w.label for w in waves] == ["zero", "calibration", "random"]
+    assert [(r.purpose, r.records) for r in records] == [
+        ("noise", 1),
+        ("calibration", 2),
+        ("average", 3),
+    ]
+    assert not np.any(waves[0].period_v)
+    # the test level follows from the calibration: the model plant gives 5 N per V
+    rms = np.sqrt(np.mean(waves[2].period_v ** 2))
+    assert rms * 5.0 == pytest.approx(plan.excitation.force_rms_n, rel=1e-6)
+    assert isinstance(commands[-1], WriteRandom)
+    frf = rig.frf
+    assert frf.frequency_hz[0] >= 10.0 and frf.frequency_hz[-1] <= 200.0
+    assert np.allclose(np.delete(frf.h1, 0, axis=1), 2.0, atol=0.01)
+    assert np.all(frf.coherence > 0.99)
+    assert frf.n_averages == 3 and frf.rms_force_n == pytest.approx(0.3, rel=1e-6)
+
+
+def test_setdrive_commands_respect_the_orders():
+    setup = setup_at()
+    plan = reduced_plan(levels_n=(2.0,), ranges=((30.0, 30.0, 1.0),))
+    rig = RecordingRig(context(setup, sample_rate_hz=5120.0), _smooth_gain)
+    commands = rig.run(stepped_sine_procedure(plan))
+    drives = [c for c in commands if isinstance(c, SetDrive)]
+    assert all(d.orders == plan.excitation.orders and d.drive_v.shape == (3,) for d in drives)
+    assert all(isinstance(c, WriteStep) for c in commands if type(c).__name__ == "WriteStep")
