@@ -99,7 +99,7 @@ def write_synthetic_run(
     )
     plan = 0
     with w:
-        for li, lv in enumerate(levels_n):
+        for li in range(len(levels_n)):
             err = 1 + force_error * (
                 rng.standard_normal((len(frequencies_hz), H))
                 + 1j * rng.standard_normal((len(frequencies_hz), H))
