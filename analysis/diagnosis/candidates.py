@@ -1,0 +1,375 @@
+"""Candidate model changes: a law of the element library at a location, or a linear change.
+
+A :class:`Location` is where an effect may act: a measured point's DOF (to ground), a group of
+springs sharing a stiffness parameter (the rubber mounts), a rigid direction of a joint (the
+clamp's rotation, released into a spring) or the whole structure (a linear parameter). A
+:class:`Law` is one element kind of the library (or a lumped mass, or a linear parameter) with
+its parameters split into those entering linearly (fitted by least squares) and those entering
+nonlinearly (a clearance, refined continuously). A :class:`Candidate` pairs them and knows how
+to write itself into a model file (:meth:`Candidate.apply`).
+
+Only the kinds defined in :mod:`analysis.elements` are candidates: an element kind registered
+from elsewhere (a simulator's hysteretic truth) is not part of the library a diagnosis may
+propose.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+from analysis.model import DofRef, Model, NonlinearSpec, Parameter
+from analysis.model_file import parse_document, to_document
+
+__all__ = [
+    "LINEAR_KINDS",
+    "Candidate",
+    "Law",
+    "Location",
+    "default_candidates",
+    "default_laws",
+    "default_locations",
+]
+
+#: Laws that are linear physics (reported as linear effects, never as nonlinear ones).
+LINEAR_KINDS = ("linear_spring", "linear_damper", "mass", "parameter", "joint_spring")
+
+#: Element parameters that enter a law nonlinearly (refined continuously, not by least squares).
+NONLINEAR_PARAMS = ("gap",)
+
+
+@dataclass(frozen=True)
+class Location:
+    """Where a candidate acts.
+
+    Attributes
+    ----------
+    name : str
+        Short label (``"point 5"``, ``"mounts"``, ``"joint clamp rz"``, ``"structure"``).
+    incidences : tuple of (DofRef, DofRef or None)
+        ``(at, to)`` of each element placed (one law, shared parameters); empty for a linear
+        parameter.
+    joint : (str, str) or None
+        ``(joint name, direction)`` released from rigid to a spring for this location.
+    point : int or None
+        The measurement point, for point locations.
+    """
+
+    name: str
+    incidences: tuple[tuple[DofRef, DofRef | None], ...] = ()
+    joint: tuple[str, str] | None = None
+    point: int | None = None
+
+    @property
+    def slug(self) -> str:
+        return re.sub(r"[^a-z0-9]+", "_", self.name.lower()).strip("_")
+
+
+@dataclass(frozen=True)
+class Law:
+    """A force law (an element kind with options), a lumped mass or a linear parameter.
+
+    Attributes
+    ----------
+    kind : str
+        Element kind, ``"mass"`` or ``"parameter"``.
+    options : dict
+        Element options (``side`` of a one-sided stop).
+    linear : tuple of str
+        Parameters entering linearly (element parameter names; ``("m",)`` for a mass).
+    nonlinear : tuple of str
+        Parameters entering nonlinearly (``("gap",)``).
+    nonnegative : tuple of str
+        Linear parameters constrained to be >= 0.
+    units : dict name -> str
+    """
+
+    kind: str
+    options: dict = field(default_factory=dict)
+    linear: tuple[str, ...] = ()
+    nonlinear: tuple[str, ...] = ()
+    nonnegative: tuple[str, ...] = ()
+    units: dict = field(default_factory=dict)
+    positive: tuple[str, ...] = ()
+
+    @property
+    def label(self) -> str:
+        side = self.options.get("side")
+        if side is None:
+            return self.kind
+        return f"{self.kind} ({'above' if side > 0 else 'below'})"
+
+    @property
+    def is_linear(self) -> bool:
+        return self.kind in LINEAR_KINDS
+
+    @property
+    def n_params(self) -> int:
+        return len(self.linear) + len(self.nonlinear)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A law at a location (or a linear parameter of the structure).
+
+    Attributes
+    ----------
+    location : Location
+    law : Law
+    parameter : str or None
+        The model parameter freed by a ``"parameter"`` candidate.
+    """
+
+    location: Location
+    law: Law
+    parameter: str | None = None
+
+    @property
+    def label(self) -> str:
+        if self.law.kind == "parameter":
+            return f"linear parameter {self.parameter}"
+        if self.location.joint is not None and self.law.kind == "joint_spring":
+            return f"compliant {self.location.name} (linear spring)"
+        extra = " with a joint spring" if self.location.joint is not None else ""
+        return f"{self.law.label}{extra} at {self.location.name}"
+
+    @property
+    def is_linear(self) -> bool:
+        return self.law.is_linear
+
+    @property
+    def n_params(self) -> int:
+        """Parameters a fit adds (a released joint adds its stiffness)."""
+        if self.law.kind == "parameter":
+            return 1
+        extra = 1 if self.location.joint is not None and self.law.kind != "joint_spring" else 0
+        return self.law.n_params + extra
+
+    @property
+    def key(self) -> str:
+        """Unique name, used for new model parameters and elements."""
+        if self.law.kind == "parameter":
+            return f"param_{self.parameter}"
+        side = self.law.options.get("side")
+        s = "" if side is None else ("_up" if side > 0 else "_down")
+        return f"{self.law.kind}{s}_{self.location.slug}"
+
+    def parameter_names(self) -> dict[str, str]:
+        """Model parameter name of every law parameter (and ``"k_joint"`` of a released joint)."""
+        if self.law.kind == "parameter":
+            return {self.parameter: self.parameter}
+        names = {p: f"{p}_{self.key}" for p in (*self.law.linear, *self.law.nonlinear)}
+        if self.location.joint is not None:
+            joint, direction = self.location.joint
+            names["k_joint"] = f"k_{joint}_{direction}"
+        return names
+
+    def apply(self, model: Model, values: Mapping[str, float]) -> tuple[Model, list[str]]:
+        """``model`` with this candidate added, and the model parameters it introduces or frees.
+
+        Parameters
+        ----------
+        model : Model
+        values : mapping law parameter -> value
+            Start values (``"k_joint"`` for a released joint's stiffness); a missing value is
+            the parameter's neutral value where one exists.
+        """
+        if self.law.kind == "parameter":
+            return model, [self.parameter]
+        names = self.parameter_names()
+        params = [
+            _new_parameter(names[p], float(values[p]), self.law, p, self.label)
+            for p in (*self.law.linear, *self.law.nonlinear)
+        ]
+        if self.law.kind == "mass":
+            return _add_mass(model, self.location, params[0]), [params[0].name]
+        out = model
+        if self.location.joint is not None:
+            k = float(values.get("k_joint", 1e6))
+            out = release_joint(out, self.location.joint, names["k_joint"], k, self.label)
+        if self.law.kind == "joint_spring":
+            return out, [names["k_joint"]]
+        for i, (at, to) in enumerate(self.location.incidences):
+            spec = NonlinearSpec(
+                name=f"{self.key}_{i}" if len(self.location.incidences) > 1 else self.key,
+                kind=self.law.kind,
+                at=at,
+                to=to,
+                params={p: names[p] for p in (*self.law.linear, *self.law.nonlinear)},
+                options=dict(self.law.options),
+            )
+            out = out.with_nonlinear(spec, params if i == 0 else ())
+        new = [p.name for p in params]
+        if self.location.joint is not None:
+            new.append(names["k_joint"])
+        return out, new
+
+
+def _new_parameter(name: str, value: float, law: Law, p: str, label: str) -> Parameter:
+    scale = abs(value) if value != 0 else 1.0
+    if p in law.nonnegative or p in law.nonlinear:
+        value = max(value, 0.0)
+        if value == 0 and p in law.positive:
+            value = 1.0  # the element needs it > 0; the fit moves it from there
+        scale = value if value > 0 else 1.0
+        lower, upper = 0.0, max(100.0 * scale, 1.0)
+    else:
+        lower, upper = -1e3 * scale, 1e3 * scale
+    return Parameter(
+        name=name,
+        value=value,
+        nominal=scale,
+        lower=lower,
+        upper=upper,
+        calibrate=True,
+        scaling="linear",
+        unit=law.units.get(p, ""),
+        group="linear" if law.kind == "mass" else "nonlinear",
+        description=f"{p} of the {label} (added by diagnosis)",
+    )
+
+
+def _edit(model: Model, edit) -> Model:
+    doc = to_document(model)
+    edit(doc)
+    return Model(**parse_document(doc, model.source))
+
+
+def release_joint(
+    model: Model, joint: tuple[str, str], name: str, value: float, label: str = ""
+) -> Model:
+    """``model`` with direction ``joint[1]`` of joint ``joint[0]`` a spring of parameter
+    ``name``."""
+    jname, direction = joint
+
+    def edit(doc):
+        for j in doc.get("joints", []):
+            if j["name"] == jname:
+                j[direction] = name
+                break
+        else:
+            raise ValueError(f"model has no joint {jname!r}")
+        doc["parameters"][name] = {
+            "value": value, "nominal": value, "lower": 1e-6 * value, "upper": 1e6 * value,
+            "calibrate": True, "scaling": "log",
+            "unit": "N/m" if direction != "rz" else "N m/rad", "group": "linear",
+            "description": f"stiffness of joint {jname} in {direction} ({label})",
+        }  # fmt: skip
+
+    return _edit(model, edit)
+
+
+def _add_mass(model: Model, location: Location, param: Parameter) -> Model:
+    node = location.incidences[0][0].node
+
+    def edit(doc):
+        doc.setdefault("masses", []).append(
+            {"name": param.name, "node": node, "m": param.name, "J": 0.0, "group": "added"}
+        )
+        d = dataclasses.asdict(param)
+        d.pop("name")
+        doc["parameters"][param.name] = {k: v for k, v in d.items() if not (
+            isinstance(v, float) and math.isinf(v))}  # fmt: skip
+
+    return _edit(model, edit)
+
+
+# -- the default candidate set -----------------------------------------------------------------
+def default_locations(model: Model) -> list[Location]:
+    """Every measurement point (its DOF to ground), each group of springs sharing a stiffness
+    parameter, and each rigid rotation or transverse direction of a joint."""
+    locs = []
+    for n, p in model.points.items():
+        locs.append(Location(f"point {n}", ((DofRef(p.node, p.direction, n), None),), point=n))
+    if model.frame is not None:
+        groups: dict[str, list] = {}
+        for s in model.frame.springs:
+            if isinstance(s.k, str):
+                groups.setdefault(s.k, []).append(s)
+        for pname, springs in groups.items():
+            inc = tuple(
+                (DofRef(s.node, s.direction), None if s.to is None else DofRef(s.to, s.direction))
+                for s in springs
+            )
+            label = "mounts" if "mount" in pname else f"springs {pname}"
+            locs.append(Location(label, inc))
+        for j in model.frame.joints:
+            for d in ("rz", "y"):
+                if j.connection(d) == "rigid":
+                    a, b = j.nodes
+                    locs.append(
+                        Location(
+                            f"joint {j.name} {d}",
+                            ((DofRef(b, d), DofRef(a, d)),),
+                            joint=(j.name, d),
+                        )
+                    )
+    return locs
+
+
+def _element_law(kind: str, **options) -> Law:
+    import analysis.elements as lib
+
+    cls = lib.ELEMENT_TYPES[kind]
+    names = cls.param_names
+    nonneg = tuple(n for n in names if n in cls.nonnegative_params or n in cls.positive_params)
+    return Law(
+        kind=kind,
+        positive=tuple(cls.positive_params),
+        options=options,
+        linear=tuple(n for n in names if n not in NONLINEAR_PARAMS),
+        nonlinear=tuple(n for n in names if n in NONLINEAR_PARAMS),
+        nonnegative=nonneg,
+        units=dict(zip(names, cls.param_units, strict=True)),
+    )
+
+
+def default_laws() -> list[Law]:
+    """One law per kind of the element library (both sides of one-sided stops) and a mass."""
+    import analysis.elements as lib
+
+    laws = []
+    for kind, cls in sorted(lib.ELEMENT_TYPES.items()):
+        if not cls.__module__.startswith("analysis.elements") or kind == "polynomial_spring":
+            continue  # library kinds only; the polynomial is a superset of its terms
+        if "side" in cls.option_names:
+            laws += [_element_law(kind, side=-1), _element_law(kind, side=1)]
+        else:
+            laws.append(_element_law(kind))
+    laws.append(Law("mass", linear=("m",), nonnegative=("m",), units={"m": "kg"}))
+    return laws
+
+
+def default_candidates(
+    model: Model,
+    locations: Sequence[Location] | None = None,
+    laws: Sequence[Law] | None = None,
+    parameters: Sequence[str] | None = None,
+) -> list[Candidate]:
+    """Every law at every location, joint releases, and each linear parameter of the model.
+
+    A mass is a candidate at point locations only; a released joint gets every law plus its
+    spring alone (``"joint_spring"``: a compliant joint, a linear effect). ``parameters``
+    (default: the model's linear parameters flagged ``calibrate``) become linear candidates.
+    """
+    locations = default_locations(model) if locations is None else list(locations)
+    laws = default_laws() if laws is None else list(laws)
+    out = []
+    for loc in locations:
+        for law in laws:
+            if law.kind == "mass" and loc.point is None:
+                continue
+            if loc.joint is not None and law.kind == "linear_spring":
+                continue  # the joint's own spring
+            out.append(Candidate(loc, law))
+        if loc.joint is not None:
+            out.append(Candidate(loc, Law("joint_spring")))
+    names = (
+        model.parameter_names(group="linear", calibrate=True) if parameters is None else parameters
+    )
+    structure = Location("structure")
+    out += [Candidate(structure, Law("parameter"), parameter=p) for p in names]
+    return out

@@ -1,0 +1,200 @@
+"""Command-line commands of the diagnosis: compare, diagnose, augment.
+
+``python -m analysis compare RUN.h5 --model M.toml``
+    residual blocks and maps of a model against a stepped-sine file;
+``python -m analysis diagnose RUN.h5 --model M.toml [--linear-run RANDOM.h5]``
+    which physical effect is missing (evidence, screen, verification, ranking);
+``python -m analysis augment RUN.h5 --model M.toml --out NEW.toml [--candidate LABEL]``
+    add it (the best of a diagnosis by default), recalibrate, show the error falling.
+
+Progress goes to stderr, the summary to stdout; ``--json`` prints one JSON object instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from analysis.diagnosis.augment import augment
+from analysis.diagnosis.branches import BranchMatchedPredictor
+from analysis.diagnosis.candidates import default_candidates
+from analysis.diagnosis.compare import compare
+from analysis.diagnosis.diagnose import DiagnosisSettings, diagnose
+from analysis.measurement_file import SteppedSineData, read_measurement
+from analysis.model import load_model
+
+__all__ = ["add_parsers"]
+
+
+def _progress(quiet: bool):
+    t0 = time.perf_counter()
+
+    def show(stage: str, info: dict) -> None:
+        if quiet:
+            return
+        t = time.perf_counter() - t0
+        if stage in ("screen", "refine"):
+            if info["index"] + 1 == info["n"] or info["index"] % 25 == 0:
+                print(f"[{t:6.1f} s] {stage} {info['index'] + 1}/{info['n']}", file=sys.stderr)
+            return
+        if stage == "lm":
+            print(f"[{t:6.1f} s] LM iteration {info['iteration']}: metric {info['cost']:.6g}",
+                  file=sys.stderr)  # fmt: skip
+            return
+        text = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
+                         for k, v in info.items() if not isinstance(v, dict | list))  # fmt: skip
+        print(f"[{t:6.1f} s] {stage}: {text}", file=sys.stderr)
+
+    return show
+
+
+def _stepped(path: str) -> SteppedSineData:
+    data = read_measurement(path)
+    if not isinstance(data, SteppedSineData):
+        raise ValueError(f"{path}: a stepped-sine run is needed (this is a random run)")
+    return data
+
+
+def _model(args):
+    model = load_model(args.model)
+    values = {}
+    for item in args.set or []:
+        name, _, value = item.partition("=")
+        values[name.strip()] = float(value)
+    return model.with_values(values) if values else model
+
+
+def cmd_compare(args) -> dict:
+    """Residual blocks of a model against a file; figures with ``--figures``."""
+    model, data = _model(args), _stepped(args.run)
+    cmp = compare(model, data, predictor=BranchMatchedPredictor(model, data))
+    if args.figures:
+        from analysis.report.diagnosis_figures import (
+            plot_frequency_level_map,
+            plot_measured_vs_model_levels,
+            plot_sensor_order_level_map,
+        )
+
+        out = Path(args.figures)
+        out.mkdir(parents=True, exist_ok=True)
+        plot_sensor_order_level_map(cmp, out / "residual_sensor_order_level.png")
+        plot_frequency_level_map(cmp, out / "residual_frequency_level.png")
+        plot_measured_vs_model_levels(cmp, out / "measured_vs_model.png")
+    if not args.json:
+        print(cmp.summary(args.top))
+    return cmp.to_json()
+
+
+def cmd_diagnose(args) -> dict:
+    """Which effect is missing."""
+    model, data = _model(args), _stepped(args.run)
+    st = DiagnosisSettings(n_verify=args.verify, workers=args.workers, n_starts=args.starts)
+    result = diagnose(model, data, linear_run=args.linear_run, settings=st,
+                      progress=_progress(args.json))  # fmt: skip
+    if args.figures:
+        from analysis.report.diagnosis_figures import plot_diagnosis
+
+        plot_diagnosis(result, args.figures)
+    if not args.json:
+        print(result.summary())
+        print(f"({result.timings.get('total_s', 0):.1f} s)")
+    return result.to_json()
+
+
+def cmd_augment(args) -> dict:
+    """Add the chosen effect (or the best of a diagnosis), recalibrate, compare."""
+    model, data = _model(args), _stepped(args.run)
+    show = _progress(args.json)
+    values = known = None
+    if args.candidate:
+        matches = [c for c in default_candidates(model) if c.label == args.candidate]
+        if not matches:
+            labels = "; ".join(c.label for c in default_candidates(model)[:12])
+            raise ValueError(f"no candidate {args.candidate!r} (e.g. {labels}; ...)")
+        cand = matches[0]
+    else:
+        st = DiagnosisSettings(workers=args.workers)
+        diag = diagnose(model, data, linear_run=args.linear_run, settings=st, progress=show)
+        if diag.verdict != "explained":
+            raise RuntimeError(
+                f"the diagnosis claims nothing to add (verdict: {diag.verdict}); name a "
+                "--candidate to add one anyway"
+            )
+        best = diag.group[0]
+        cand = best.candidate
+        screen = best.screen
+        values, known = dict(screen.values), dict(screen.known)
+        show("chosen", {"candidate": cand.label})
+    result = augment(model, data, cand, values=values, known=known, linear_run=args.linear_run,
+                     n_starts=args.starts, out=args.out, progress=show)  # fmt: skip
+    if args.figures:
+        from analysis.report.diagnosis_figures import plot_before_after, plot_error_history
+
+        out = Path(args.figures)
+        out.mkdir(parents=True, exist_ok=True)
+        plot_before_after(result.before, result.after, out / "before_after.png",
+                          title=cand.label)  # fmt: skip
+        plot_error_history(result.history, out / "error_history.png", title=cand.label)
+    if not args.json:
+        print(result.summary())
+    return result.to_json()
+
+
+def add_parsers(subparsers) -> None:
+    """Add ``compare``, ``diagnose`` and ``augment`` to an ``argparse`` sub-parser collection."""
+
+    def common(sp):
+        sp.add_argument("run", help="stepped-sine measurement file (.h5)")
+        sp.add_argument("--model", help="calibrated model file (default: the reference rig)")
+        sp.add_argument("--set", action="append", metavar="NAME=VALUE", help="override a value")
+        sp.add_argument("--figures", metavar="DIR", help="write the figures into DIR")
+        sp.add_argument("--json", action="store_true", help="print one JSON object")
+
+    sp = subparsers.add_parser("compare", help="residual maps of a model against a file")
+    common(sp)
+    sp.add_argument("--top", type=int, default=8, help="failing blocks listed")
+    sp.set_defaults(func=cmd_compare)
+
+    sp = subparsers.add_parser("diagnose", help="which physical effect the model misses")
+    common(sp)
+    sp.add_argument("--linear-run", help="random-excitation test (for linear candidates)")
+    sp.add_argument("--verify", type=int, default=2, help="distinct laws verified in full")
+    sp.add_argument("--starts", type=int, default=6, help="extra starts for strong effects")
+    sp.add_argument("--workers", type=int, default=2, help="processes for verifications")
+    sp.set_defaults(func=cmd_diagnose)
+
+    sp = subparsers.add_parser("augment", help="add an effect, recalibrate, compare")
+    common(sp)
+    sp.add_argument("--out", required=True, help="the new model file (the old one is kept)")
+    sp.add_argument("--candidate", help="candidate label (default: the diagnosis' best)")
+    sp.add_argument("--linear-run", help="random-excitation test (for a linear effect)")
+    sp.add_argument("--starts", type=int, default=8, help="Latin hypercube starts")
+    sp.add_argument("--workers", type=int, default=2, help="processes for verifications")
+    sp.set_defaults(func=cmd_augment)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Stand-alone entry: ``python -m analysis.diagnosis.cli diagnose ...``."""
+    import json
+    import logging
+
+    parser = argparse.ArgumentParser(prog="python -m analysis.diagnosis.cli")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
+    add_parsers(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")  # fmt: skip
+    try:
+        result = args.func(args)
+    except (ValueError, OSError, RuntimeError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(result, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

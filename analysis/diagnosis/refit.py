@@ -1,0 +1,276 @@
+"""Recalibration on the measured branch: several starts, then Levenberg-Marquardt.
+
+The calibration machinery of :mod:`analysis.calibration` (parameter scaling, the uncertainty-
+weighted FRF metric, bounded LM) on a :class:`~analysis.diagnosis.branches.BranchMatchedPredictor`,
+so a step the test measured on the other branch of a jump does not dominate the metric. Used to
+calibrate a base model the paper's way (Latin hypercube starts) and to recalibrate every
+candidate model of a diagnosis (given starts: the screen's estimate and the current values).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from analysis.calibration.lhs import Distribution, latin_hypercube
+from analysis.calibration.lm import LeastSquaresResult, least_squares_lm
+from analysis.calibration.objective import FRFObjective
+from analysis.calibration.parameters import ParameterSpace
+from analysis.diagnosis.branches import BranchMatchedPredictor
+from analysis.measurement_file import SteppedSineData
+from analysis.model import Model
+
+__all__ = ["Refit", "refit"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Refit:
+    """Result of :func:`refit`.
+
+    Attributes
+    ----------
+    model : Model
+        The input model at the fitted values.
+    parameters : dict name -> float
+    std : dict name -> float
+        From ``(J^T J)^-1`` of the uncertainty-weighted metric.
+    chi2_per_dof : float
+        ``2 cost / (m - n)`` over the fitted steps.
+    n_residuals : int
+        Real residuals ``m`` (two per complex FRF value).
+    history : list of dict
+        Per accepted LM iteration of the best start: ``iteration``, ``chi2_per_dof``,
+        ``parameters``.
+    start_costs : list of float
+        Metric of every start tried (``inf`` where the model did not converge).
+    lm : LeastSquaresResult
+    seconds : float
+    """
+
+    model: Model
+    parameters: dict[str, float]
+    std: dict[str, float]
+    chi2_per_dof: float
+    n_residuals: int
+    history: list[dict] = field(default_factory=list)
+    start_costs: list[float] = field(default_factory=list)
+    lm: LeastSquaresResult | None = None
+    seconds: float = 0.0
+
+
+#: Prefix of a modal damping ratio calibrated with the parameters: ``"zeta_4"`` is mode 4's.
+ZETA = "zeta_"
+
+
+class _DampedPredictor(BranchMatchedPredictor):
+    """A predictor whose parameters may include modal damping ratios (``zeta_<mode>``),
+    differentiated by finite differences (one further solution per ratio)."""
+
+    def predict(self, values=None, params=(), rows=None):
+        values = dict(values or {})
+        zetas = {n: values.pop(n) for n in list(values) if n.startswith(ZETA)}
+        base_model = self.model
+        if zetas:
+            per_mode = dict(base_model.damping.per_mode)
+            per_mode.update({int(n[len(ZETA) :]): float(v) for n, v in zetas.items()})
+            self.model = base_model.with_damping(
+                dataclasses.replace(base_model.damping, per_mode=per_mode)
+            )
+        try:
+            plain = [p for p in params if not p.startswith(ZETA)]
+            pred = super().predict(values, plain, rows)
+            for n in params:
+                if n.startswith(ZETA):
+                    h = 1e-3 * zetas[n]
+                    per_mode = dict(self.model.damping.per_mode)
+                    per_mode[int(n[len(ZETA) :])] = zetas[n] + h
+                    keep = self.model
+                    self.model = keep.with_damping(
+                        dataclasses.replace(keep.damping, per_mode=per_mode)
+                    )
+                    try:
+                        shifted = super().predict(values, (), rows)
+                    finally:
+                        self.model = keep
+                    pred.d_frf[n] = (shifted.frf - pred.frf) / h
+            return pred
+        finally:
+            self.model = base_model
+
+    def _linear_model(self, model):
+        key = (tuple(sorted(model.damping.per_mode.items())), model.damping.default_zeta)
+        if getattr(self, "_damping_key", None) != key:
+            self._linear_key = None
+            self._damping_key = key
+        return super()._linear_model(model)
+
+
+def _space(model: Model, names) -> ParameterSpace:
+    plain = [n for n in names if not n.startswith(ZETA)]
+    sp = ParameterSpace.from_model(model, plain)
+    zetas = [n for n in names if n.startswith(ZETA)]
+    if not zetas:
+        return sp
+    z = np.array([model.damping.per_mode.get(int(n[len(ZETA):]), model.damping.default_zeta)
+                  for n in zetas])  # fmt: skip
+    order = list(names)
+    allv = {
+        "log": dict(zip(plain, sp.log, strict=True)) | {n: True for n in zetas},
+        "nominal": dict(zip(plain, sp.nominal, strict=True)) | dict(zip(zetas, z, strict=True)),
+        "lower": dict(zip(plain, sp.lower, strict=True)) | {n: 1e-4 for n in zetas},
+        "upper": dict(zip(plain, sp.upper, strict=True)) | {n: 0.2 for n in zetas},
+    }
+    return ParameterSpace(
+        names=tuple(order),
+        **{k: np.array([v[n] for n in order], dtype=bool if k == "log" else float)
+           for k, v in allv.items()},
+    )  # fmt: skip
+
+
+def _objective(model, data, names, rows, n_harmonics, n_time) -> FRFObjective:
+    cls = _DampedPredictor if any(n.startswith(ZETA) for n in names) else BranchMatchedPredictor
+    pred = cls(model, data, n_harmonics=n_harmonics, n_time=n_time)
+    space = _space(model, names)
+    mask = np.zeros((data.n_steps, len(pred.channel_indices)), bool)
+    mask[rows] = True
+    return FRFObjective(pred, space, mask, "uncertainty")
+
+
+def _current(model: Model, name: str) -> float:
+    if name.startswith(ZETA):
+        return model.damping.per_mode.get(int(name[len(ZETA) :]), model.damping.default_zeta)
+    return model.parameters[name].value
+
+
+def _with_values(model: Model, values: Mapping[str, float]) -> Model:
+    """The model at fitted values, modal damping ratios included."""
+    zetas = {int(n[len(ZETA) :]): v for n, v in values.items() if n.startswith(ZETA)}
+    out = model.with_values({n: v for n, v in values.items() if not n.startswith(ZETA)})
+    if zetas:
+        per_mode = {**out.damping.per_mode, **zetas}
+        out = out.with_damping(dataclasses.replace(out.damping, per_mode=per_mode))
+    return out
+
+
+def refit(
+    model: Model,
+    data: SteppedSineData,
+    parameters: Sequence[str],
+    *,
+    rows: np.ndarray | None = None,
+    starts: Sequence[Mapping[str, float]] = (),
+    distributions: Mapping[str, Distribution] | None = None,
+    n_random_starts: int = 0,
+    n_lm_starts: int = 1,
+    seed: int = 0,
+    max_iterations: int = 30,
+    ftol: float = 1e-6,
+    n_harmonics: int = 9,
+    n_time: int = 128,
+    progress: Callable[[str, dict], None] | None = None,
+) -> Refit:
+    """Fit ``parameters`` of ``model`` to the stepped-sine FRFs of ``data``.
+
+    Parameters
+    ----------
+    model : Model
+        Start values are its current values (always one of the starts).
+    data : SteppedSineData
+    parameters : sequence of str
+        Fitted parameters (any group); bounds and scaling from the model file. ``zeta_<n>``
+        is the modal damping ratio of mode ``n`` (log scaled, 1e-4 to 0.2).
+    rows : ndarray of int, optional
+        Steps fitted (default: all). Steps where the start model does not converge are left out.
+    starts : sequence of mapping
+        Further start values (missing names keep the model's value).
+    distributions : mapping name -> Distribution, optional
+        With ``n_random_starts``: Latin hypercube starts (the paper's method).
+    n_lm_starts : int
+        The best starts (by the metric) refined by Levenberg-Marquardt.
+    max_iterations : int
+    ftol : float
+        Stop when an iteration lowers the metric by less than this fraction.
+    n_harmonics, n_time : int
+        Balance settings of the predictions.
+    progress : callable, optional
+        ``progress(stage, info)``: ``"start"`` per start evaluated, ``"lm"`` per iteration.
+
+    Returns
+    -------
+    Refit
+    """
+    t0 = time.perf_counter()
+    names = tuple(parameters)
+    rows = np.arange(data.n_steps) if rows is None else np.asarray(rows)
+    obj = _objective(model, data, names, rows, n_harmonics, n_time)
+    base = obj.predictor.predict(rows=rows)
+    good = rows[base.converged[rows]]
+    if good.size < rows.size:
+        log.info(
+            "%d step(s) left out: the start model does not converge there", rows.size - good.size
+        )
+        obj = _objective(model, data, names, good, n_harmonics, n_time)
+    space = obj.space
+    p0 = np.array([_current(model, n) for n in names])
+    candidates = [p0]
+    for s in starts:
+        candidates.append(np.array([float(s.get(n, v)) for n, v in zip(names, p0, strict=True)]))
+    if n_random_starts:
+        dists = dict(distributions or {})
+        candidates += list(latin_hypercube(dists, n_random_starts, seed, names))
+    lo, hi = space.theta_bounds()
+    thetas = np.clip(np.array([space.to_theta(c) for c in candidates]), lo, hi)
+    costs = []
+    for i, th in enumerate(thetas):
+        costs.append(obj.cost(th))
+        if progress:
+            progress("start", {"index": i, "n": len(thetas), "cost": costs[-1]})
+    costs = np.array(costs)
+    if not np.isfinite(costs).any():
+        raise RuntimeError("no start gives a converged model response on the fitted steps")
+    best: LeastSquaresResult | None = None
+    for k in np.argsort(costs)[:n_lm_starts]:
+        if not np.isfinite(costs[k]):
+            continue
+        res = least_squares_lm(
+            obj,
+            thetas[k],
+            bounds=(lo, hi),
+            max_iterations=max_iterations,
+            ftol=ftol,
+            callback=(lambda h: progress("lm", h)) if progress else None,
+        )
+        if best is None or res.cost < best.cost:
+            best = res
+    m, n = best.fun.size, space.size
+    dof = max(m - n, 1)
+    values = space.as_dict(space.to_physical(best.x))
+    fitted = _with_values(model, values)
+    D = np.diag(space.dp_dtheta(best.x))
+    std = np.sqrt(np.clip(np.diag(D @ best.cov @ D), 0, None))
+    history = [
+        {
+            "iteration": h["iteration"],
+            "chi2_per_dof": 2 * h["cost"] / dof,
+            "parameters": space.as_dict(space.to_physical(np.array(h["x"]))),
+        }
+        for h in best.history
+    ]
+    return Refit(
+        model=fitted,
+        parameters=values,
+        std=dict(zip(names, std.tolist(), strict=True)),
+        chi2_per_dof=2 * best.cost / dof,
+        n_residuals=m,
+        history=history,
+        start_costs=[float(c) for c in costs],
+        lm=best,
+        seconds=time.perf_counter() - t0,
+    )

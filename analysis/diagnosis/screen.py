@@ -1,0 +1,802 @@
+"""Harmonic-domain screen of candidate laws: force estimate, states from the data, BIC.
+
+With the calibrated linear structure (receptances ``R``) and every nonlinear force acting at a
+set of locations ``L`` (the model's own elements ``K`` and the candidate's ``b``), the measured
+response harmonics at the sensors ``C`` are exactly
+
+    Y_h = R_Cd(h W) F_h + R_CL(h W) g_h .
+
+Per step and measured order the forces ``g`` are estimated by weighted least squares, and
+from them the displacement at every location, ``U_h = R_.d F_h + R_.L g_h`` (no model of the
+nonlinearity needed). The mean and the higher harmonics, which accelerometers do not give,
+follow from the laws themselves (statics for the mean, ``U_h = R_.L(h W) f_L,h(U)``), iterated.
+A law is then fitted in the response domain, its parameters entering linearly (a clearance is
+refined continuously), the model's own elements refitted at the same states.
+
+Evaluating a stiff law at states read from noisy data amplifies the noise through the loop
+gain ``R J`` of the structure and the law (``J`` the law's harmonic Jacobian), and a state read
+from the same data a law is fitted to would fit the noise. Both are undone by whitening each
+step's residual with ``(I - M)^-1``, ``M = W R J R_UL A^+ W^-1`` the derivative of the residual
+with respect to the data through the states: the screen's residual is then, to first order,
+the output-error residual of the model with the law at the measured states, and a law at a
+location the data cannot see explains nothing. The known element's clearance is profiled per
+location and then linearised.
+
+Each fit is scored by BIC (and AICc) on the file's uncertainties; ranks and ties follow.
+
+References
+----------
+G. Kerschen, K. Worden, A. F. Vakakis, J.-C. Golinval, "Past, present and future of nonlinear
+system identification in structural dynamics", MSSP 20 (2006) 505-592 (restoring-force and
+force-estimate methods). N. M. Mangan, J. N. Kutz, S. L. Brunton, J. L. Proctor, "Model
+selection for dynamical systems via sparse regression and information criteria",
+Proc. R. Soc. A 473 (2017) 20170009.
+"""
+
+from __future__ import annotations
+
+import copy
+import logging
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import lsq_linear, minimize_scalar
+
+from analysis.diagnosis.branches import BranchMatchedPredictor
+from analysis.diagnosis.candidates import (
+    Candidate,
+    Law,
+    Location,
+    default_locations,
+    release_joint,
+)
+from analysis.elements import make_element
+from analysis.measurement_file import SteppedSineData
+from analysis.mhb.aft import element_forces
+from analysis.mhb.harmonics import HarmonicBasis
+from analysis.model import Model
+from analysis.system import attachments
+
+__all__ = ["JOINT_ANCHOR", "Screen", "ScreenFit", "information_criteria"]
+
+log = logging.getLogger(__name__)
+
+#: Stiffness [N m/rad or N/m] a released joint gets in the screen's linear model; the fitted
+#: spring change of every joint law is added to it.
+JOINT_ANCHOR = 1e5
+_POSITIVE = ("k", "k_c", "k_t")
+#: Friction laws are screened with their switch smoothed over this share of each step's
+#: largest velocity at the location.
+SMOOTH_FRICTION = 0.05
+#: Fixed-point passes of the unmeasured harmonics under the model's own elements at the
+#: measured states, before the first fit.
+INITIAL_PASSES = 8
+
+
+def _option_names(kind: str) -> dict:
+    import analysis.elements as lib
+
+    return lib.ELEMENT_TYPES[kind].option_names
+
+
+def information_criteria(rss: float, n: int, k: int) -> tuple[float, float]:
+    """``BIC = n ln(rss/n) + k ln n`` and ``AICc = n ln(rss/n) + 2k + 2k(k+1)/(n-k-1)``."""
+    base = n * math.log(max(rss, 1e-300) / n)
+    return base + k * math.log(n), base + 2 * k + 2 * k * (k + 1) / max(n - k - 1, 1)
+
+
+@dataclass
+class ScreenFit:
+    """Fit of one candidate by the screen.
+
+    Attributes
+    ----------
+    candidate : Candidate
+    rss : float
+        Whitened residual sum of squares (a chi-square) over ``n`` real residuals.
+    n, k : int
+        Residuals and fitted parameters (the model's own element parameters included).
+    bic, aicc : float
+    values : dict
+        Law parameters (and ``k_joint`` of a released joint) in model units.
+    known : dict
+        The model's own element parameters refitted at the same states.
+    """
+
+    candidate: Candidate
+    rss: float
+    n: int
+    k: int
+    bic: float
+    aicc: float
+    values: dict[str, float] = field(default_factory=dict)
+    known: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def chi2_per_dof(self) -> float:
+        return self.rss / max(self.n - self.k, 1)
+
+
+# -- real harmonic algebra on the measured orders --------------------------------------------
+def _realify(Z: np.ndarray) -> np.ndarray:
+    """Real operator of complex per-order matrices ``Z`` (n, K, r, c) on coefficients ordered
+    (order, cos/sin, signal): shape (n, 2K r, 2K c)."""
+    n, K, r, c = Z.shape
+    out = np.zeros((n, K, 2, r, K, 2, c))
+    for k in range(K):
+        out[:, k, 0, :, k, 0, :] = Z[:, k].real
+        out[:, k, 0, :, k, 1, :] = Z[:, k].imag
+        out[:, k, 1, :, k, 0, :] = -Z[:, k].imag
+        out[:, k, 1, :, k, 1, :] = Z[:, k].real
+    return out.reshape(n, 2 * K * r, 2 * K * c)
+
+
+def _vec(X: np.ndarray) -> np.ndarray:
+    """Coefficients (n, 2K m) of phasors (n, K, m) in the order of :func:`_realify`."""
+    return np.stack([X.real, -X.imag], axis=2).reshape(X.shape[0], -1)
+
+
+class _Basis:
+    """Samples of harmonics 0..H over one base period and the projections back."""
+
+    def __init__(self, H: int, n_time: int, order_k: np.ndarray) -> None:
+        tau = 2 * np.pi * np.arange(n_time) / n_time
+        h = np.arange(H + 1)
+        self.H, self.n_time = H, n_time
+        self.E = np.exp(1j * np.outer(tau, h))  # x(t) = Re(E @ X)
+        w = np.full(H + 1, 2.0 / n_time)
+        w[0] = 1.0 / n_time
+        self.P = np.exp(-1j * np.outer(h, tau)) * w[:, None]  # X = P @ x
+        self.order_k = order_k
+        # real coefficient rows/columns of the measured orders
+        cols = []
+        for k in order_k:
+            cols.append(np.cos(k * tau))
+            cols.append(np.sin(k * tau))
+        self.Eo = np.array(cols).T  # u(t) = Eo @ [a1, b1, a2, b2, ...]
+        self.dEo = np.array(
+            [c for k in order_k for c in (-k * np.sin(k * tau), k * np.cos(k * tau))]
+        ).T
+        self.Po = np.linalg.pinv(self.Eo)  # projection of samples on the order coefficients
+
+    def time(self, X: np.ndarray, omega: np.ndarray):
+        """Displacement and velocity samples (n, T, m) of phasors X (n, H+1, m)."""
+        u = (self.E @ X).real
+        hw = 1j * np.arange(self.H + 1)[None, :, None] * omega[:, None, None]
+        v = (self.E @ (X * hw)).real
+        return u, v
+
+    def phasors(self, x: np.ndarray) -> np.ndarray:
+        """Phasors (n, H+1, m) of samples (n, T, m)."""
+        return self.P @ x
+
+
+@dataclass
+class _Frame:
+    """A linear model's receptances on the measured steps."""
+
+    model: Model
+    dofs: list[int]  # D (positions: sensors first)
+    R: np.ndarray  # (n, H+1, nD, nD + 1) complex: from [drive, D...] to D
+    known: list  # (element, pos_a, pos_b, {model p: element p})
+    X0: np.ndarray  # (n, H+1, nD) start phasors (the anchor's)
+    omega: np.ndarray
+
+
+class Screen:
+    """The screen of candidates against one file, at a calibrated model.
+
+    Parameters
+    ----------
+    model : Model
+        The calibrated model (without sensor masses: the file's are added).
+    data : SteppedSineData
+    n_iterations : int
+        Alternations of the whitening and the unmeasured harmonics with the fitted law.
+    rcond : float
+        Relative singular-value cut of the force estimate.
+    n_time : int
+        Samples per base period of the law evaluations.
+    predictor : BranchMatchedPredictor, optional
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        data: SteppedSineData,
+        *,
+        n_iterations: int = 3,
+        rcond: float = 1e-8,
+        n_time: int = 128,
+        predictor: BranchMatchedPredictor | None = None,
+    ) -> None:
+        self.model, self.data = model, data
+        self.n_iterations, self.rcond, self.n_time = n_iterations, rcond, n_time
+        self.predictor = p = predictor or BranchMatchedPredictor(model, data)
+        self.n_channels = C = len(p.channel_indices)
+        Hm, s = p.measured()
+        d = data
+        orders = np.array([float(o) for o in p.orders])
+        wk = 2 * np.pi * d.frequency_hz[:, None] * orders[None, :]
+        sign = np.array(p._out_sign)[None, :, None]
+        power = np.array(p._power)[None, :, None]
+        conv = sign / (1j * wk[:, None, :]) ** power
+        self._Y = (Hm * (d.force[:, None, :] * conv)).transpose(0, 2, 1)  # (n, K, C)
+        positive = s[np.isfinite(s) & (s > 0)]
+        sig = np.maximum(np.nan_to_num(s, nan=positive.max()), positive.min())
+        self._sigma = (sig * np.abs(d.force[:, None, :] * conv)).transpose(0, 2, 1)
+        self._F = p._force_sign * d.force  # (n, K) on the drive DOF
+        self._frames: dict = {}
+        self._states: dict = {}
+        self._base_points = None
+        self._syn: Screen | None = None
+        self.rows: np.ndarray | None = None
+        del C
+
+    # -- linear frames ------------------------------------------------------------------------
+    @staticmethod
+    def _dof(asm, ref) -> int:
+        if ref.node is not None and ref.direction is not None:
+            return asm.dof_index(ref.node, ref.direction)
+        return asm.point_dof(ref.point, ref.direction)
+
+    def _anchor_points(self):
+        """The calibrated model's solution on the measured branch, at every DOF of interest."""
+        if self._base_points is None:
+            p = self.predictor
+            asm = p.model.assemble()
+            extra = self._interesting(p.model, asm)
+            pb, points = p.solve(p.model, extra_dofs=[x for x in extra if x not in p._out_dofs])
+            self._base_points = (pb, points)
+            rows = np.array(sorted(r for r, q in points.items() if q.converged), dtype=int)
+            self.rows = rows
+            H = pb.n_harmonics
+            self._basis = _Basis(H, self.n_time, np.asarray(pb.order_k))
+            self._harmonic_basis = HarmonicBasis(H, self.n_time)
+        return self._base_points
+
+    def _interesting(self, model, asm, joint=None) -> list[int]:
+        atts = attachments(model)
+        extra = [a.dof_a for a in atts] + [a.dof_b for a in atts if a.dof_b is not None]
+        for loc in default_locations(model):
+            if loc.joint is None:
+                extra += [self._dof(asm, r) for inc in loc.incidences for r in inc if r]
+        if joint is not None:
+            nodes = next(j.nodes for j in model.frame.joints if j.name == joint[0])
+            extra += [asm.dof_index(nd, joint[1]) for nd in nodes]
+        return list(dict.fromkeys(extra))
+
+    def frame(self, joint: tuple[str, str] | None = None) -> _Frame:
+        """Receptances of the model (``joint=None``) or of the model with a joint direction
+        released into a spring of :data:`JOINT_ANCHOR`; cached."""
+        if joint in self._frames:
+            return self._frames[joint]
+        pb, points = self._anchor_points()
+        p = self.predictor
+        if joint is None:
+            model = p.model
+        else:
+            name = f"k_{joint[0]}_{joint[1]}"
+            bare = release_joint(self.model, joint, name, JOINT_ANCHOR, "screen")
+            model = BranchMatchedPredictor(bare, self.data).model
+        asm = model.assemble()
+        dofs = list(p._out_dofs) + [
+            x for x in self._interesting(model, asm, joint) if x not in p._out_dofs
+        ]
+        lin = p._linear_model(model) if joint is None else _linear(model)
+        drive = asm.point_dof(self.data.actuator.point, self.data.actuator.direction.lstrip("-"))
+        H = pb.n_harmonics
+        rows = self.rows
+        omega = 2 * np.pi * self.data.frequency_hz[rows] / pb.denominator
+        hw = (omega[:, None] * np.arange(H + 1)[None, :]).ravel()
+        R = lin.block(dofs, [drive, *dofs])(hw).reshape(rows.size, H + 1, len(dofs), len(dofs) + 1)
+        R[:, 0] = R[:, 0].real
+        # start phasors: the anchor's at DOFs the base model has (by node and direction)
+        base_asm = p.model.assemble()
+        base_out = list(pb.output_dofs)
+        X0 = np.zeros((rows.size, H + 1, len(dofs)), complex)
+        for j, dd in enumerate(dofs):
+            label = asm.dofs[dd]
+            try:
+                bd = base_asm.dof_index(*label)
+            except KeyError:
+                continue
+            if bd in base_out:
+                col = base_out.index(bd)
+                X0[:, :, j] = np.array([points[r].q_out[:, col] for r in rows])
+        pos = {dd: j for j, dd in enumerate(dofs)}
+        known = [
+            (a.element, pos[a.dof_a], None if a.dof_b is None else pos[a.dof_b], dict(a.param_map))
+            for a in attachments(model)
+        ]
+        fr = _Frame(model, dofs, R, known, X0, omega)
+        self._frames[joint] = fr
+        return fr
+
+    # -- states ------------------------------------------------------------------------------
+    def _incidence(self, fr: _Frame, loc: Location) -> np.ndarray:
+        asm = fr.model.assemble()
+        pos = {dd: j for j, dd in enumerate(fr.dofs)}
+        B = np.zeros((len(loc.incidences), len(fr.dofs)))
+        for i, (at, to) in enumerate(loc.incidences):
+            B[i, pos[self._dof(asm, at)]] += 1.0
+            if to is not None:
+                B[i, pos[self._dof(asm, to)]] -= 1.0
+        return B
+
+    def _known_incidence(self, fr: _Frame) -> np.ndarray:
+        nD = len(fr.dofs)
+        rows = []
+        for _, a, b, _ in fr.known:
+            r = np.zeros(nD)
+            r[a] = 1.0
+            if b is not None:
+                r[b] = -1.0
+            rows.append(r)
+        return np.array(rows).reshape(-1, nD)
+
+    def states(self, fr: _Frame, B_loc: np.ndarray | None, key) -> dict:
+        """Force estimate and measured-order states with forces at the model's elements and
+        at the incidences ``B_loc`` (a group larger than the sensors can resolve acts as one
+        force distributed like the anchor's displacements there)."""
+        if key in self._states:
+            return self._states[key]
+        C = self.n_channels
+        bs = self._basis
+        K = bs.order_k.size
+        BK = self._known_incidence(fr)
+        n = self.rows.size
+        Y = self._Y[self.rows]
+        W = 1.0 / self._sigma[self.rows]  # (n, K, C) complex-magnitude weights
+        Bs = [BK] if BK.size else []
+        if B_loc is not None:
+            if B_loc.shape[0] + BK.shape[0] < C:
+                Bs.append(B_loc)
+        Lam = np.vstack(Bs) if Bs else np.zeros((0, len(fr.dofs)))
+        grouped = B_loc is not None and B_loc.shape[0] + BK.shape[0] >= C
+        out_U = np.empty((n, K, len(fr.dofs)), complex)
+        ghat = []
+        P_rows = []  # d U(orders, all D) / d (weighted data), real per step
+        for kk, h in enumerate(bs.order_k):
+            R = fr.R[:, h]  # (n, nD, 1 + nD)
+            Rd = R[:, :, 0]
+            RL = np.einsum("nij,lj->nil", R[:, :, 1:], Lam)
+            if grouped:
+                shape = np.einsum("nj,lj->nl", fr.X0[:, h], B_loc)
+                shape /= np.maximum(np.linalg.norm(shape, axis=1, keepdims=True), 1e-300)
+                g_dir = np.einsum("nl,lj->nj", shape, B_loc)  # generalized force on D
+                RL = np.concatenate(
+                    [RL, np.einsum("nij,nj->ni", R[:, :, 1:], g_dir)[:, :, None]], axis=2
+                )
+            A = RL[:, :C, :]  # (n, C, nL)
+            y = Y[:, kk] - Rd[:, :C] * self._F[self.rows, kk][:, None]
+            Aw = A * W[:, kk, :, None]
+            pinv = np.linalg.pinv(Aw, rcond=self.rcond)  # (n, nL, C)
+            g = np.einsum("nlc,nc->nl", pinv, y * W[:, kk])
+            ghat.append(g)
+            out_U[:, kk] = Rd * self._F[self.rows, kk][:, None] + np.einsum("nil,nl->ni", RL, g)
+            P_rows.append(np.einsum("nil,nlc->nic", RL, pinv))  # complex (n, nD, C)
+        st = {"U": out_U, "P": np.stack(P_rows, axis=1), "W": W, "Y": Y, "grouped": grouped}
+        self._states[key] = st
+        return st
+
+    def _param_derivative(self, fr: _Frame, name: str) -> np.ndarray:
+        key = ("dR", name)
+        if key not in self._states:
+            lin = self.predictor._linear_model(fr.model)
+            asm = fr.model.assemble()
+            act = self.data.actuator
+            drive = asm.point_dof(act.point, act.direction.lstrip("-"))
+            bs = self._basis
+            C = self.n_channels
+            w = (fr.omega[:, None] * bs.order_k[None, :]).ravel()
+            blk = lin.block(fr.dofs[:C], [drive, *fr.dofs])
+            d = blk.derivative(w, name).reshape(self.rows.size, bs.order_k.size, C, -1)
+            self._states[key] = d
+        return self._states[key]
+
+    # -- public ---------------------------------------------------------------------------------
+    def fit(
+        self, cand: Candidate, n_iterations: int | None = None, nonlinear: dict | None = None
+    ) -> ScreenFit:
+        """Fit one candidate (see the module notes).
+
+        Parameters
+        ----------
+        cand : Candidate
+        n_iterations : int, optional
+            Alternations (default: the screen's); 0 is one pass at the data's states.
+        nonlinear : dict, optional
+            Fixed values of the law's nonlinear parameters (default: refined continuously).
+        """
+        its = self.n_iterations if n_iterations is None else n_iterations
+        self._anchor_points()
+        loc, law = cand.location, cand.law
+        fr = self.frame(loc.joint)
+        n_known = sum(len(pm) for *_, pm in fr.known)
+        if law.kind == "parameter":
+            st = self.states(fr, None, (id(fr), None))
+            rss, n, theta, known = self._fit(fr, st, None, None, {}, cand.parameter, its)
+            value = self.model.parameters[cand.parameter].value + theta[cand.parameter]
+            k = 1 + n_known
+            bic, aicc = information_criteria(rss, n, k)
+            return ScreenFit(cand, rss, n, k, bic, aicc, {cand.parameter: value}, known)
+        B = self._incidence(fr, loc)
+        st = self.states(fr, B, (id(fr), loc))
+        k = cand.n_params + n_known
+        # a location in the force estimate lets the states absorb part of the noise even with
+        # no law there: scale by that share, measured on the model's own response plus noise
+        syn = self._synthetic()
+        absorbed = syn._null(fr, loc, B) / syn._null(fr, None, None)
+
+        def run(nonlinear):
+            return self._fit(fr, st, cand, B, nonlinear, None, its)
+
+        if law.nonlinear and nonlinear:
+            rss, n, theta, known = run(dict(nonlinear))
+        elif law.nonlinear:
+            name = law.nonlinear[0]
+            Xi = np.einsum("nkj,lj->nkl", st["U"], B)
+            u = np.einsum("tk,nkl->ntl", self._basis.E[:, self._basis.order_k], Xi).real
+            side = law.options.get("side")
+            amp = float(np.abs(u).max() if side is None else max((side * u).max(), 1e-12))
+            grid = amp * np.array([0.0, 0.15, 0.3, 0.45, 0.6, 0.75, 0.9])
+            fits = [run({name: g}) for g in grid]
+            i = int(np.argmin([f[0] for f in fits]))
+            best = fits[i] + (float(grid[i]),)
+            lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+            if hi > lo:
+                opt = minimize_scalar(
+                    lambda g: run({name: g})[0], bounds=(lo, hi), method="bounded",
+                    options={"xatol": 5e-3 * amp, "maxiter": 6},
+                )  # fmt: skip
+                if opt.fun < best[0]:
+                    best = run({name: float(opt.x)}) + (float(opt.x),)
+            rss, n, theta, known = best[:4]
+        else:
+            rss, n, theta, known = run({})
+        values = {p: theta[p] for p in (*law.linear, *law.nonlinear) if p in theta}
+        if loc.joint is not None:
+            values["k_joint"] = JOINT_ANCHOR + theta.get("k_joint_delta", 0.0)
+        rss = rss / absorbed
+        bic, aicc = information_criteria(rss, n, k)
+        return ScreenFit(cand, rss, n, k, bic, aicc, values, known)
+
+    def _synthetic(self) -> Screen:
+        """This screen on synthetic data: the model's own response plus noise of the file's
+        standard errors (seeded), sharing the linear frames."""
+        if self._syn is None:
+            self._anchor_points()
+            syn = copy.copy(self)
+            syn._states, syn._syn = {}, syn
+            fr = self.frame(None)
+            rng = np.random.default_rng(0)
+            Y = self._Y.copy()
+            C = self.n_channels
+            model = fr.X0[:, self._basis.order_k, :C]
+            noise = rng.standard_normal(model.shape) + 1j * rng.standard_normal(model.shape)
+            Y[self.rows] = model + noise * self._sigma[self.rows] / np.sqrt(2)
+            syn._Y = Y
+            self._syn = syn
+        return self._syn
+
+    def _null(self, fr: _Frame, loc: Location | None, B) -> float:
+        """Residual with forces estimated at the model's elements (and ``loc``) but no law
+        at ``loc``; cached."""
+        key = ("null", id(fr), loc)
+        if key not in self._states:
+            st = self.states(fr, B, (id(fr), loc))
+            self._states[key] = self._fit(fr, st, None, None, {}, None, 0)[0]
+        return self._states[key]
+
+    def baseline(self) -> ScreenFit:
+        """The model as it is, its own element parameters refitted at the measured states."""
+        self._anchor_points()
+        fr = self.frame(None)
+        st = self.states(fr, None, (id(fr), None))
+        rss, n, _, known = self._fit(fr, st, None, None, {})
+        k = sum(len(pm) for *_, pm in fr.known)
+        bic, aicc = information_criteria(rss, n, k)
+        return ScreenFit(Candidate(Location("none"), Law("none")), rss, n, k, bic, aicc, {}, known)
+
+    def run(
+        self,
+        candidates: Sequence[Candidate],
+        n_refine: int = 12,
+        progress: Callable | None = None,
+    ) -> list[ScreenFit]:
+        """Fit every candidate in one pass at the data's states, then the best ``n_refine``
+        with the alternations (keeping the better of the two fits); sorted by BIC."""
+        fits = []
+        for i, c in enumerate(candidates):
+            try:
+                fits.append(self.fit(c, n_iterations=0))
+            except (ValueError, np.linalg.LinAlgError) as exc:
+                log.warning("screen of %s failed: %s", c.label, exc)
+            if progress:
+                progress("screen", {"index": i, "n": len(candidates), "label": c.label})
+        fits.sort(key=lambda f: f.bic)
+        for i, f in enumerate(fits[:n_refine]):
+            fixed = {p: f.values[p] for p in f.candidate.law.nonlinear if p in f.values}
+            try:
+                g = self.fit(f.candidate, nonlinear=fixed)
+            except (ValueError, np.linalg.LinAlgError) as exc:
+                log.warning("screen of %s failed: %s", f.candidate.label, exc)
+                g = f
+            fits[i] = g if g.bic < f.bic else f  # the better approximation of the two
+            if progress:
+                progress("refine", {"index": i, "n": n_refine, "label": f.candidate.label})
+        return sorted(fits, key=lambda f: f.bic)
+
+    # -- one fit ------------------------------------------------------------------------------
+    def _parts(self, fr: _Frame, cand: Candidate | None, B_loc, values: dict):
+        """Force laws at the current values: (element or law, incidence rows (m, nD),
+        {name: model parameter} of linear parameters, linear names)."""
+        parts = []
+        for element, a, b, pmap in fr.known:
+            row = np.zeros((1, len(fr.dofs)))
+            row[0, a] = 1.0
+            if b is not None:
+                row[0, b] = -1.0
+            parts.append(("known", element, row, pmap))
+        if cand is not None and cand.law.kind not in ("none",):
+            parts.append(("cand", cand.law, B_loc, values))
+        return parts
+
+    def _law_eval(self, fr, law_or_element, X_inc, theta, want_basis):
+        """Forces (n, H+1, m) at incidence phasors X_inc, their order Jacobian (n, m, 2K, 2K)
+        and, with ``want_basis``, the force of each linear parameter at unit value."""
+        bs = self._basis
+        u, v = bs.time(X_inc, fr.omega)
+        n, T, m = u.shape
+        v_scale = None
+        if isinstance(law_or_element, Law):
+            law = law_or_element
+            if law.kind in ("mass", "linear_spring", "joint_spring"):
+                return self._linear_law(fr, law, X_inc, theta, want_basis)
+            kw = {}
+            for p in law.linear:
+                val = float(theta.get(p, 0.0))
+                kw[p] = max(val, 1e-30) if p in _POSITIVE else val
+            kw.update({p: float(theta[p]) for p in law.nonlinear})
+            options = dict(law.options)
+            if "v_reg" in _option_names(law.kind):
+                # a friction law's sign switch, sampled, misplaces the switch and spikes the
+                # Jacobian: screen it with the switch smoothed over a share of each velocity
+                vmax = np.abs(v).max(axis=1, keepdims=True)
+                options["v_reg"] = 1.0
+                v_scale = 1.0 / np.maximum(SMOOTH_FRICTION * vmax, 1e-12)
+                v = v * v_scale
+            element = make_element(law.kind, **kw, **options)
+            linear = law.linear
+        else:
+            el = law_or_element
+            th = {p: (max(v, 1e-30) if p in el.positive_params else v) for p, v in theta.items()}
+            element = el.with_params(**th) if th else el
+            linear = element.param_names
+        if element.switch_threshold() is not None:
+            return self._exact_aft(fr, element, X_inc, linear if want_basis else None)
+        ev = element.evaluate(u, v, want_basis)
+        f = bs.phasors(ev.f)
+        dfdv = ev.df_dv * (v_scale if v_scale is not None else 1.0)
+        du = np.moveaxis(ev.df_du, 1, 2)[:, :, None, :]  # (n, m, 1, T)
+        dv = np.moveaxis(dfdv * fr.omega[:, None, None], 1, 2)[:, :, None, :]
+        Jm = (bs.Po * du) @ bs.Eo + (bs.Po * dv) @ bs.dEo  # (n, m, 2K, 2K)
+        basis = None
+        if want_basis:
+            names = element.param_names
+            basis = {p: bs.phasors(ev.df_dp[names.index(p)]) for p in linear}
+        return f, Jm, basis
+
+    def _exact_aft(self, fr, element, X_inc, linear):
+        """:func:`_law_eval` for a law whose force jumps: the balance's own AFT, which
+        integrates each jump exactly (sampling it would misplace it by half a sample)."""
+        hb = self._harmonic_basis
+        bs = self._basis
+        n, H1, m = X_inc.shape
+        K = bs.order_k.size
+        f = np.zeros((n, H1, m), complex)
+        Jm = np.zeros((n, m, 2 * K, 2 * K))
+        names = element.param_names
+        basis = None if linear is None else {p: np.zeros((n, H1, m), complex) for p in linear}
+        idx = np.array([c for k in bs.order_k for c in (2 * k - 1, 2 * k)])
+        for i in range(n):
+            for j in range(m):
+                Ue = hb.from_complex(X_inc[i, :, j])
+                F, D, dFp = element_forces(hb, element, Ue, fr.omega[i], True, linear is not None)
+                f[i, :, j] = hb.to_complex(F)
+                Jm[i, j] = D[np.ix_(idx, idx)]
+                if linear is not None:
+                    for p in linear:
+                        basis[p][i, :, j] = hb.to_complex(dFp[:, names.index(p)])
+        return f, Jm, basis
+
+    def _linear_law(self, fr, law, X, theta, want_basis):
+        bs = self._basis
+        n, H1, m = X.shape
+        h = np.arange(H1)
+        if law.kind == "mass":
+            gain = (h[None, :] * fr.omega[:, None]) ** 2  # f = m (h w)^2 U
+            name = "m"
+        else:
+            gain = -np.ones((n, H1))  # f = -k U
+            name = "k"
+        f = theta.get(name, 0.0) * gain[:, :, None] * X
+        K = bs.order_k.size
+        Jm = np.zeros((n, m, 2 * K, 2 * K))
+        for kk, hk in enumerate(bs.order_k):
+            Jm[:, :, 2 * kk, 2 * kk] = Jm[:, :, 2 * kk + 1, 2 * kk + 1] = (
+                theta.get(name, 0.0) * gain[:, hk, None]
+            )
+        basis = {name: gain[:, :, None] * X} if want_basis else None
+        return f, Jm, basis
+
+    def _initial_states(self, fr: _Frame, st: dict) -> np.ndarray:
+        """Phasors at D: the measured orders from the data, the mean and higher harmonics
+        from the model's own elements at those states (fixed point; the anchor's solution may
+        sit on another branch than the test)."""
+        bs = self._basis
+        if "X_init" not in st and st is not self.states(fr, None, (id(fr), None)):
+            # the unmeasured harmonics follow the model's elements, whose states the sensors
+            # give whatever the location: take them from the model's own force estimate
+            X = self._initial_states(fr, self.states(fr, None, (id(fr), None)))
+            X[:, bs.order_k] = st["U"]
+            st["X_init"] = X
+        if "X_init" not in st:
+            X = fr.X0.copy()
+            X[:, bs.order_k] = st["U"]
+            other = np.setdiff1d(np.arange(bs.H + 1), bs.order_k)
+            fine = _Basis(bs.H, 1024, bs.order_k)
+            for _ in range(INITIAL_PASSES):
+                g = np.zeros_like(X)
+                for element, a, b, _ in fr.known:
+                    row = np.zeros(len(fr.dofs))
+                    row[a] = 1.0
+                    if b is not None:
+                        row[b] = -1.0
+                    Xi = np.einsum("nhd,d->nh", X, row)[:, :, None]
+                    u, v = fine.time(Xi, fr.omega)  # finely sampled: no per-step loop
+                    g += fine.phasors(element.evaluate(u, v).f) * row[None, None, :]
+                X[:, other] = np.einsum("nhij,nhj->nhi", fr.R[:, other, :, 1:], g[:, other])
+            st["X_init"] = X
+        return st["X_init"].copy()
+
+    def _fit(self, fr, st, cand, B_loc, nonlinear: dict, param=None, n_iterations=None):
+        """Alternate: whitening and unmeasured harmonics at the current values, then the
+        linear least squares of every linear parameter. Returns (rss, n, values, known)."""
+        bs = self._basis
+        C, K = self.n_channels, bs.order_k.size
+        n = self.rows.size
+        H1 = bs.H + 1
+        X = self._initial_states(fr, st)
+        law = None if cand is None or cand.law.kind == "none" else cand.law
+        joint = cand is not None and cand.location.joint is not None
+        theta = dict(nonlinear)
+        if law is not None:
+            theta.update({p: 0.0 for p in law.linear})
+        if joint:
+            theta["k_joint_delta"] = 0.0
+        known = {mp: el.params[ep] for el, _, _, pmap in fr.known for mp, ep in pmap.items()}
+        W = st["W"]
+        Wr = np.stack([W, W], axis=2).reshape(n, -1)  # (n, 2KC)
+        R_o = fr.R[:, bs.order_k]  # (n, K, nD, 1 + nD)
+        drive = R_o[:, :, :C, 0] * self._F[self.rows][:, :, None]
+        other = np.setdiff1d(np.arange(H1), bs.order_k)
+        # incidences where laws act: the model's elements, then the candidate's
+        incid = []
+        for element, a, b, pmap in fr.known:
+            row = np.zeros(len(fr.dofs))
+            row[a] = 1.0
+            if b is not None:
+                row[b] = -1.0
+            incid.append(("known", element, row[None, :], pmap))
+        if law is not None or joint:
+            incid.append(("cand", law, B_loc, None))
+        # per incidence: response at the sensors to a unit force (real) and state map
+        maps = {}
+        for i, (_, _, rows, _) in enumerate(incid):
+            for j, row in enumerate(rows):
+                Rr = np.einsum("nkcd,d->nkc", R_o[:, :, :C, 1:], row)[:, :, :, None]
+                Pr = np.einsum("d,nkdc->nkc", row, st["P"])[:, :, None, :]
+                maps[i, j] = (_realify(Rr), _realify(Pr))
+        rss = np.inf
+        its = self.n_iterations if n_iterations is None else n_iterations
+        for it in range(its + 1):
+            g_total = np.zeros((n, H1, len(fr.dofs)), complex)
+            M = np.zeros((n, 2 * K * C, 2 * K * C))
+            columns, names, lower = [], [], []
+            for i, (kind_, law_i, rows, pmap) in enumerate(incid):
+                Xi = np.einsum("nhd,ld->nhl", X, rows)
+                if kind_ == "known":
+                    th = {ep: known[mp] for mp, ep in pmap.items()}
+                    ck = ("known", id(st), i)
+                    if it == 0 and ck in st:
+                        f, Jm, basis = st[ck]
+                    else:
+                        f, Jm, basis = self._law_eval(fr, law_i, Xi, th, True)
+                        if it == 0:
+                            st[ck] = (f, Jm, basis)
+                    for mp, ep in pmap.items():
+                        columns.append(np.einsum("nhl,ld->nhd", basis[ep], rows))
+                        names.append(("known_delta" if ep == "gap" else "known", mp))
+                        lower.append(-np.inf if ep == "gap" else 0.0)
+                else:
+                    f = np.zeros_like(Xi)
+                    Jm = np.zeros((n, rows.shape[0], 2 * K, 2 * K))
+                    if law is not None and law.kind != "joint_spring":
+                        th = {p: theta[p] for p in (*law.linear, *law.nonlinear)}
+                        f, Jm, basis = self._law_eval(fr, law, Xi, th, True)
+                        for p in law.linear:
+                            columns.append(np.einsum("nhl,ld->nhd", basis[p], rows))
+                            names.append(("cand", p))
+                            lower.append(0.0 if p in law.nonnegative else -np.inf)
+                    if joint:
+                        sp = Law("linear_spring")
+                        fs, Js, bsp = self._law_eval(
+                            fr, sp, Xi, {"k": theta["k_joint_delta"]}, True
+                        )
+                        f, Jm = f + fs, Jm + Js
+                        columns.append(np.einsum("nhl,ld->nhd", bsp["k"], rows))
+                        names.append(("cand", "k_joint_delta"))
+                        lower.append(-np.inf)
+                g_total += np.einsum("nhl,ld->nhd", f, rows)
+                for j in range(rows.shape[0]):
+                    Rr, Pr = maps[i, j]
+                    M += Rr @ Jm[:, j] @ Pr
+            if it > 0 and other.size:
+                # unmeasured harmonics follow the laws: U_h = R_DD(h W) g_h
+                X[:, other] = np.einsum("nhij,nhj->nhi", fr.R[:, other, :, 1:], g_total[:, other])
+            M *= Wr[:, :, None]
+            S = np.linalg.inv(np.eye(2 * K * C)[None] - M)
+            resp = np.einsum("nkij,nkj->nki", R_o[:, :, :C, 1:], g_total[:, bs.order_k])
+            y0 = np.einsum("nij,nj->ni", S, _vec((st["Y"] - drive - resp) * W)).ravel()
+            A = []
+            for col in columns:
+                r = np.einsum("nkij,nkj->nki", R_o[:, :, :C, 1:], col[:, bs.order_k])
+                A.append(np.einsum("nij,nj->ni", S, _vec(r * W)).ravel())
+            if param is not None:
+                dR = self._param_derivative(fr, param)  # (n, K, C, 1 + nD)
+                fo = np.concatenate(
+                    [self._F[self.rows][:, :, None], g_total[:, bs.order_k]], axis=2
+                )
+                r = np.einsum("nkij,nkj->nki", dR, fo)
+                A.append(np.einsum("nij,nj->ni", S, _vec(r * W)).ravel())
+                names.append(("param", param))
+                lower.append(-np.inf)
+            cur = np.array(
+                [known[nm] if kd == "known" else theta.get(nm, 0.0) if kd == "cand" else 0.0
+                 for kd, nm in names]
+            )  # fmt: skip
+            Am = np.column_stack(A) if A else np.zeros((y0.size, 0))
+            x, rss = _bounded_lsq(Am, y0 + Am @ cur, np.array(lower, float))
+            for (kd, nm), v in zip(names, x, strict=True):
+                if kd == "known":
+                    known[nm] = float(v)
+                elif kd == "known_delta":
+                    known[nm] = max(float(known[nm] + v), 0.0)
+                elif kd == "param":
+                    theta[nm] = theta.get(nm, 0.0) + float(v)
+                else:
+                    theta[nm] = float(v)
+            if it == its:
+                break
+        return rss, 2 * K * C * n, theta, known
+
+
+def _bounded_lsq(A: np.ndarray, y: np.ndarray, lower: np.ndarray):
+    if A.shape[1] == 0:
+        return np.zeros(0), float(y @ y)
+    s = np.linalg.norm(A, axis=0)
+    s[s == 0] = 1.0
+    res = lsq_linear(A / s, y, bounds=(lower * s, np.full(lower.size, np.inf)), method="bvls")
+    x = res.x / s
+    r = y - A @ x
+    return x, float(r @ r)
+
+
+def _linear(model: Model):
+    from analysis.system import build_linear
+
+    return build_linear(model)

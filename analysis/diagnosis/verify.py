@@ -1,0 +1,243 @@
+"""Verification of screened candidates in the full model.
+
+Each candidate is added to the model and everything it touches is recalibrated with the
+multi-harmonic balance and Levenberg-Marquardt on the measured branch
+(:func:`analysis.diagnosis.refit.refit`): the candidate's parameters and the model's own
+nonlinear parameters, from the screen's estimates and, for strong effects, several further
+starts. A linear candidate is first recalibrated with the model's linear parameters on the
+linear (random-excitation) test when one is given, the paper's way. The result carries the
+per-step chi-square of the recalibrated model against the whole file, so candidates are
+compared on the same steps.
+
+Jobs are self-contained and picklable (:class:`VerifyJob`), so they run on any executor
+(:func:`analysis.planning.executors.open_executor`).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from analysis.calibration.lhs import Distribution, paper_distributions
+from analysis.diagnosis.branches import BranchMatchedPredictor
+from analysis.diagnosis.candidates import Candidate
+from analysis.diagnosis.compare import compare
+from analysis.diagnosis.refit import refit
+from analysis.measurement_file import read_measurement
+from analysis.model import Model
+
+__all__ = ["VerifyJob", "Verified", "band_modes", "damping_parameters", "run_verify",
+           "start_distributions"]  # fmt: skip
+
+#: Laws that act at rest (their tangent at zero motion is a damper): the linear test's modal
+#: damping already holds their share, so a candidate with one recalibrates that damping too.
+ACT_AT_REST = ("coulomb_friction", "linear_damper")
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class VerifyJob:
+    """One candidate to verify: picklable and self-contained.
+
+    Parameters
+    ----------
+    model_toml, source : str
+        The calibrated model as model-file text and where it came from.
+    data_path : str
+        The stepped-sine file.
+    rows : tuple of int or None
+        Steps used (None: all).
+    candidate : Candidate
+    values : dict
+        Start values of the candidate's parameters (the screen's estimate).
+    known : dict
+        Start values of the model's own nonlinear parameters (the screen's refit).
+    linear_run : str or None
+        A random-excitation file for linear candidates.
+    max_iterations : int
+    n_starts : int
+        Further Latin hypercube starts.
+    seed : int
+    """
+
+    model_toml: str
+    source: str
+    data_path: str
+    rows: tuple[int, ...] | None
+    candidate: Candidate
+    values: Mapping[str, float]
+    known: Mapping[str, float]
+    linear_run: str | None = None
+    max_iterations: int = 12
+    n_starts: int = 0
+    seed: int = 0
+
+
+@dataclass
+class Verified:
+    """A candidate recalibrated in the full model.
+
+    Attributes
+    ----------
+    candidate : Candidate
+    parameters : dict
+        Every recalibrated parameter (new and existing) in model units.
+    step_chi2 : ndarray, shape (n_steps,)
+        ``2 sum |r|^2`` of each step over channels and orders (NaN where the model did not
+        converge); ``values_per_step`` real residuals each.
+    values_per_step : int
+    model_toml : str
+        The recalibrated model with the candidate.
+    history : list of dict
+        LM iterations (``iteration``, ``chi2_per_dof``, ``parameters``).
+    linear : dict or None
+        The linear recalibration (parameters, metric) of a linear candidate.
+    seconds : float
+    message : str
+    """
+
+    candidate: Candidate
+    parameters: dict[str, float]
+    step_chi2: np.ndarray
+    values_per_step: int
+    model_toml: str
+    history: list[dict] = field(default_factory=list)
+    linear: dict | None = None
+    seconds: float = 0.0
+    message: str = ""
+
+    @property
+    def failed(self) -> bool:
+        return not np.isfinite(self.step_chi2).any()
+
+    def chi2_per_dof(self, rows: np.ndarray | None = None) -> float:
+        z = self.step_chi2 if rows is None else self.step_chi2[rows]
+        z = z[np.isfinite(z)]
+        if not z.size:
+            return np.inf
+        return float(z.sum() / (z.size * self.values_per_step))
+
+    def rms_over_noise(self, rows: np.ndarray | None = None) -> float:
+        return float(np.sqrt(self.chi2_per_dof(rows)))
+
+
+def start_distributions(
+    model: Model, names: list[str], values: Mapping[str, float]
+) -> dict[str, Distribution]:
+    """Start distributions: the paper's for the contact, a decade either side of the screen's
+    estimate for a new positive parameter, a factor 2 for others (within the bounds)."""
+    out: dict[str, Distribution] = {}
+    paper = paper_distributions(
+        model.parameters["gap"].nominal if "gap" in model.parameters else 1e-3
+    )
+    for n in names:
+        p = model.parameters[n]
+        v = float(values.get(n, p.value))
+        if n in paper:
+            out[n] = paper[n]
+        elif v > 0 and p.lower >= 0:
+            lo, hi = max(v / 10, p.lower if p.lower > 0 else v / 10), min(10 * v, p.upper)
+            out[n] = Distribution("loguniform", lo, max(hi, lo * 1.001))
+        else:
+            s = abs(v) if v else 1.0
+            out[n] = Distribution("uniform", max(v - 2 * s, p.lower), min(v + 2 * s, p.upper))
+    return out
+
+
+def band_modes(model: Model, data) -> list[int]:
+    """Modes (1-based) whose natural frequency lies in the file's fundamental band."""
+    pred = BranchMatchedPredictor(model, data)
+    f, _ = pred.model.assemble().normal_modes(20)
+    lo, hi = 0.9 * data.frequency_hz.min(), 1.1 * data.frequency_hz.max()
+    return [i + 1 for i, x in enumerate(f) if lo <= x <= hi]
+
+
+def damping_parameters(candidate: Candidate, model: Model, data) -> list[str]:
+    """``zeta_<mode>`` names a candidate recalibrates (laws acting at rest, joints)."""
+    if candidate.law.kind in ACT_AT_REST or candidate.location.joint is not None:
+        return [f"zeta_{m}" for m in band_modes(model, data)]
+    return []
+
+
+def _linear_recalibration(model: Model, run: str, names: list[str]):
+    from analysis.calibration.linear import calibrate_linear
+
+    linear = [n for n in model.parameter_names(group="linear", calibrate=True)]
+    res = calibrate_linear(model, run, parameters=tuple(linear), min_modes=min(4, len(linear)))
+    info = {"parameters": res.parameters, "cost": res.cost, "n_residuals": int(res.jac.shape[0])}
+    del names
+    return res.model, info
+
+
+def run_verify(job: VerifyJob) -> Verified:
+    """Add the candidate, recalibrate, and score the result on the whole file (top level,
+    so executors can run it)."""
+    t0 = time.perf_counter()
+    try:
+        return _verify(job, t0)
+    except Exception as exc:  # a worker must return, whatever the candidate does
+        log.warning("verification of %s failed: %s", job.candidate.label, exc)
+        return Verified(job.candidate, {}, np.full(0, np.nan), 1, "", message=str(exc),
+                        seconds=time.perf_counter() - t0)  # fmt: skip
+
+
+def _verify(job: VerifyJob, t0: float) -> Verified:
+    model = Model.from_toml_text(job.model_toml, job.source)
+    data = read_measurement(job.data_path)
+    if job.rows is not None:
+        data = data.take(np.asarray(job.rows))
+    cand = job.candidate
+    m2, new = cand.apply(model, dict(job.values))
+    if cand.law.kind == "parameter":
+        m2 = m2.with_values({cand.parameter: job.values[cand.parameter]})
+    known_names = [n for n in model.parameter_names(group="nonlinear", calibrate=True)]
+    start = {}
+    for n, v in job.known.items():
+        if n in m2.parameters:
+            p = m2.parameters[n]
+            start[n] = float(np.clip(v, p.lower, p.upper))
+    m2 = m2.with_values(start)
+    linear_info = None
+    if cand.is_linear and job.linear_run is not None:
+        m2, linear_info = _linear_recalibration(m2, job.linear_run, new)
+        new = [n for n in new if m2.parameters[n].group != "linear"]
+    names = list(dict.fromkeys([*new, *known_names, *damping_parameters(cand, m2, data)]))
+    dists = None
+    if job.n_starts:
+        plain = [n for n in names if not n.startswith("zeta_")]
+        dists = start_distributions(m2, plain, {}) | {
+            n: Distribution("loguniform", 0.002, 0.05) for n in names if n.startswith("zeta_")
+        }
+    message = ""
+    try:
+        r = refit(
+            m2, data, names, starts=[], distributions=dists, n_random_starts=job.n_starts,
+            seed=job.seed, max_iterations=job.max_iterations, ftol=1e-4,
+        )  # fmt: skip
+        fitted, history, params = r.model, r.history, r.parameters
+        message = r.lm.message if r.lm is not None else ""
+    except (RuntimeError, ValueError) as exc:
+        log.warning("verification of %s failed: %s", cand.label, exc)
+        fitted, history, params, message = m2, [], {}, str(exc)
+    cmp = compare(fitted, data, predictor=BranchMatchedPredictor(fitted, data))
+    z = np.abs(cmp.residual) ** 2
+    step = 2 * z.sum(axis=(1, 2))
+    step[~np.all(np.isfinite(z), axis=(1, 2))] = np.nan
+    if linear_info is not None:
+        params = {**linear_info["parameters"], **params}
+    return Verified(
+        candidate=cand,
+        parameters=params,
+        step_chi2=step,
+        values_per_step=2 * z.shape[1] * z.shape[2],
+        model_toml=fitted.to_toml(),
+        history=history,
+        linear=linear_info,
+        seconds=time.perf_counter() - t0,
+        message=message,
+    )

@@ -1,0 +1,154 @@
+"""Figures of a diagnosis: residual maps, measured vs model, error history, before and after.
+
+Residual maps show the root of the chi-square per degree of freedom (1 = at the noise) on a
+log colour scale, so a failing block stands out at a glance: one map by sensor x order x level
+(a panel per order) and one by frequency x level (every step).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.colors import LogNorm  # noqa: E402
+
+from analysis.report.calibration_figures import plot_measured_vs_model  # noqa: E402
+
+__all__ = [
+    "plot_before_after",
+    "plot_diagnosis",
+    "plot_error_history",
+    "plot_frequency_level_map",
+    "plot_measured_vs_model_levels",
+    "plot_sensor_order_level_map",
+]
+
+_NORM = {"vmin": 0.5, "vmax": 300.0}
+
+
+def _save(fig, path) -> Path:
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _sensor_order_level(ax_row, cmp, title: str = ""):
+    grid, levels = cmp.map_sensor_order_level()
+    rms = np.sqrt(grid)
+    im = None
+    for k, ax in enumerate(ax_row):
+        im = ax.imshow(rms[:, k, :], norm=LogNorm(**_NORM), cmap="magma_r", aspect="auto")
+        ax.set_xticks(range(len(levels)), [f"{lv:g}" for lv in levels])
+        ax.set_yticks(range(len(cmp.channels)), cmp.channels)
+        ax.set_xlabel("level [N]")
+        ax.set_title(f"{title}order {cmp.orders[k]}", fontsize=9)
+        for i in range(rms.shape[0]):
+            for j in range(rms.shape[2]):
+                v = rms[i, k, j]
+                if np.isfinite(v):
+                    ax.text(j, i, f"{v:.3g}", ha="center", va="center", fontsize=7,
+                            color="white" if v > 20 else "black")  # fmt: skip
+    return im
+
+
+def plot_sensor_order_level_map(cmp, path: str | Path, *, title: str = "") -> Path:
+    """Residual / noise per sensor (rows), level (columns), one panel per order."""
+    K = len(cmp.orders)
+    fig, axes = plt.subplots(1, K, figsize=(3.2 * K + 1, 0.5 * len(cmp.channels) + 2))
+    axes = np.atleast_1d(axes)
+    im = _sensor_order_level(axes, cmp)
+    fig.colorbar(im, ax=list(axes), label="rms residual / noise", shrink=0.8)
+    if title:
+        fig.suptitle(title)
+    fig.savefig(Path(path), dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return Path(path)
+
+
+def _frequency_level(ax, cmp):
+    levels = sorted(set(cmp.level_n.tolist()))
+    freqs = np.unique(np.round(cmp.frequency_hz, 6))
+    img = np.full((len(levels), freqs.size), np.nan)
+    z = np.sqrt(np.nanmean(np.abs(cmp.residual) ** 2, axis=(1, 2)))
+    for i, f in enumerate(np.round(cmp.frequency_hz, 6)):
+        img[levels.index(cmp.level_n[i]), np.searchsorted(freqs, f)] = z[i]
+    edges = np.concatenate([[freqs[0] - 0.05], (freqs[1:] + freqs[:-1]) / 2, [freqs[-1] + 0.05]])
+    im = ax.pcolormesh(edges, np.arange(len(levels) + 1) - 0.5, img, norm=LogNorm(**_NORM),
+                       cmap="magma_r")  # fmt: skip
+    ax.set_yticks(range(len(levels)), [f"{lv:g} N" for lv in levels])
+    ax.set_xlabel("frequency [Hz]")
+    return im
+
+
+def plot_frequency_level_map(cmp, path: str | Path, *, title: str = "") -> Path:
+    """Residual / noise of every step (all sensors and orders), frequency x level."""
+    fig, ax = plt.subplots(figsize=(9, 2.8))
+    im = _frequency_level(ax, cmp)
+    fig.colorbar(im, ax=ax, label="rms residual / noise")
+    ax.set_title(title or "residual by frequency and level")
+    return _save(fig, path)
+
+
+def plot_measured_vs_model_levels(cmp, path: str | Path, *, title: str = "") -> Path:
+    """|H| per sensor and order, measured (markers) and model (lines), one colour per level."""
+    curves = {}
+    for lv in sorted(set(cmp.level_n.tolist())):
+        m = cmp.level_n == lv
+        order = np.argsort(cmp.frequency_hz[m])
+        curves[f"{lv:g} N"] = (
+            cmp.frequency_hz[m][order], cmp.measured[m][order], cmp.predicted[m][order]
+        )  # fmt: skip
+    return plot_measured_vs_model(curves, cmp.channels, cmp.orders, path, title=title)
+
+
+def plot_error_history(history: Sequence[dict], path: str | Path, *, title: str = "") -> Path:
+    """Chi-square per degree of freedom by iteration (log scale)."""
+    fig, ax = plt.subplots(figsize=(5.5, 3.2))
+    its = [h for h in history if np.isfinite(h.get("chi2_per_dof", np.nan))]
+    ax.semilogy(range(len(its)), [h["chi2_per_dof"] for h in its], "o-")
+    ax.axhline(1.0, color="0.5", ls="--", lw=1, label="noise")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("chi2 / dof (fitted levels)")
+    ax.legend()
+    ax.set_title(title or "error history")
+    return _save(fig, path)
+
+
+def plot_before_after(before, after, path: str | Path, *, title: str = "") -> Path:
+    """Residual maps of the model before and after the change (sensor x order x level, and
+    frequency x level), on one colour scale."""
+    K = len(before.orders)
+    fig = plt.figure(figsize=(3.2 * K + 1.5, 8.5))
+    gs = fig.add_gridspec(4, K)
+    for r, (cmp, name) in enumerate(((before, "before"), (after, "after"))):
+        axes = [fig.add_subplot(gs[r, k]) for k in range(K)]
+        im = _sensor_order_level(axes, cmp, f"{name} ({cmp.rms_over_noise:.3g} x noise): ")
+        ax = fig.add_subplot(gs[2 + r, :])
+        _frequency_level(ax, cmp)
+        ax.set_title(f"{name}: by frequency and level", fontsize=9)
+    fig.colorbar(im, ax=fig.axes, label="rms residual / noise", shrink=0.6)
+    if title:
+        fig.suptitle(title)
+    fig.savefig(Path(path), dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_diagnosis(diagnosis, folder: str | Path) -> list[Path]:
+    """The figures of a diagnosis in ``folder``: the two residual maps and measured vs model."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    cmp = diagnosis.comparison
+    return [
+        plot_sensor_order_level_map(cmp, folder / "residual_sensor_order_level.png",
+                                    title=f"model vs file: {cmp.rms_over_noise:.3g} x noise"),
+        plot_frequency_level_map(cmp, folder / "residual_frequency_level.png"),
+        plot_measured_vs_model_levels(cmp, folder / "measured_vs_model.png"),
+    ]  # fmt: skip

@@ -1,0 +1,49 @@
+"""Figures and the command line."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from analysis.diagnosis import BranchMatchedPredictor, compare
+from analysis.diagnosis.cli import add_parsers
+from analysis.report.diagnosis_figures import (
+    plot_before_after,
+    plot_error_history,
+    plot_frequency_level_map,
+    plot_measured_vs_model_levels,
+    plot_sensor_order_level_map,
+)
+
+
+def test_figures_are_written(runs, reference_model, tmp_path) -> None:
+    data = runs("two_sided_stop")
+    cmp = compare(reference_model, data, predictor=BranchMatchedPredictor(reference_model, data))
+    paths = [
+        plot_sensor_order_level_map(cmp, tmp_path / "a.png"),
+        plot_frequency_level_map(cmp, tmp_path / "b.png"),
+        plot_measured_vs_model_levels(cmp, tmp_path / "c.png"),
+        plot_before_after(cmp, cmp, tmp_path / "d.png"),
+        plot_error_history([{"chi2_per_dof": 50.0}, {"chi2_per_dof": 1.1}], tmp_path / "e.png"),
+    ]
+    assert all(p.stat().st_size > 5000 for p in paths)
+
+
+def _run(argv, capsys):
+    parser = argparse.ArgumentParser()
+    add_parsers(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    out = args.func(args)
+    return out, capsys.readouterr()
+
+
+def test_compare_and_diagnose_commands(runs, reference_model, tmp_path, capsys) -> None:
+    data = runs("reference")
+    model_path = reference_model.save(tmp_path / "model.toml")
+    out, text = _run(["compare", str(data.path), "--model", str(model_path),
+                      "--figures", str(tmp_path / "fig")], capsys)  # fmt: skip
+    assert "chi2/dof" in text.out and out["rms_over_noise"] < 1.3
+    assert (tmp_path / "fig" / "residual_sensor_order_level.png").exists()
+    out, text = _run(["diagnose", str(data.path), "--model", str(model_path), "--json"], capsys)
+    assert out["verdict"] == "adequate"
+    json.dumps(out)
