@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis.linear.static_support import StaticSupport
 from analysis.measurement_file import SteppedSineData
 from analysis.mhb.sensitivity import point_sensitivities
 from analysis.mhb.sweep import solve_steps
@@ -163,7 +164,10 @@ class SteppedSinePredictor:
             )
         )
         if key != self._linear_key:
-            self._linear = build_linear(model, f_max_hz=self.settings["f_max_hz"])
+            lin = build_linear(model, f_max_hz=self.settings["f_max_hz"])
+            static = self.data.actuator.static_stiffness_n_per_m
+            # The unmeasured mean force: the shaker holds the drive point (see StaticSupport).
+            self._linear = StaticSupport(lin, self._force_dof, static) if static > 0 else lin
             self._linear_key = key
         return self._linear
 

@@ -14,6 +14,7 @@ import json  # noqa: E402
 import sys  # noqa: E402
 
 SCENARIOS = {
+    "calibrate": "benchmarks.calibrate",
     "mhb": "benchmarks.mhb",
     "planning": "benchmarks.planning",
 }

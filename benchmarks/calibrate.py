@@ -41,6 +41,8 @@ def _make_runs(folder: Path, seed: int, quick: bool) -> tuple[Path, Path]:
         str(seed),
         "--quiet",
         "--overwrite",
+        "--lock-dir",
+        str(folder / "locks"),
     ]
     for argv in (["linear", "--out", str(lin)], ["run", "paper", "--out", str(paper)]):
         r = subprocess.run(

@@ -258,6 +258,11 @@ class DriveSetup:
         Direction the shaker pushes.
     shaker : str
         Shaker and stinger, for the record.
+    static_stiffness_n_per_m : float
+        Stiffness with which the shaker holds the drive point at its mean position: the
+        armature suspension in series with the stinger [N/m] (0: unknown or negligible). It
+        goes into the measurement file (the mean force is not measured) so that a model can
+        place the mean response of a structure with a one-sided contact.
     """
 
     physical: str = "Dev1/ao0"
@@ -265,6 +270,7 @@ class DriveSetup:
     point: int = 3
     direction: str = "y"
     shaker: str = ""
+    static_stiffness_n_per_m: float = 0.0
 
     def __post_init__(self) -> None:
         _check_positive("DriveSetup", "limit_v", self.limit_v)
@@ -273,6 +279,11 @@ class DriveSetup:
         if isinstance(self.point, bool) or not isinstance(self.point, int) or self.point < 0:
             raise ValueError(f"DriveSetup.point: expected an integer >= 0, got {self.point!r}")
         _check_direction("DriveSetup", self.direction)
+        k = self.static_stiffness_n_per_m
+        if isinstance(k, bool) or not isinstance(k, int | float) or not (0 <= k < float("inf")):
+            raise ValueError(
+                f"DriveSetup.static_stiffness_n_per_m: expected a number >= 0 N/m, got {k!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -411,7 +422,9 @@ class LabSetup:
     @property
     def actuator(self) -> Actuator:
         """Where the shaker acts (the file's ``/setup/actuator``)."""
-        return Actuator(self.drive.point, self.drive.direction)
+        return Actuator(
+            self.drive.point, self.drive.direction, float(self.drive.static_stiffness_n_per_m)
+        )
 
     def sensor_masses_kg(self, channels: Iterable[ChannelSetup] | None = None) -> dict[str, float]:
         """Sensor mass per channel name (what a simulated rig adds to its structure)."""
@@ -493,6 +506,7 @@ def setup_from_dict(data: Mapping[str, Any], source: str = "setup") -> LabSetup:
         point=drive_t.integer("point", minimum=0),
         direction=drive_t.text("direction", "y"),
         shaker=drive_t.text("shaker", ""),
+        static_stiffness_n_per_m=drive_t.number("static_stiffness_n_per_m", 0.0, minimum=0.0),
     )
     drive_t.finish()
     amp_t = root.table("amplifier")

@@ -93,6 +93,7 @@ def write_header(
     act = setup.create_group("actuator")
     act.attrs["point"] = np.int64(actuator.point)
     act.attrs["direction"] = actuator.direction
+    act.attrs["static_stiffness_n_per_m"] = np.float64(actuator.static_stiffness_n_per_m)
 
 
 def build_file(path: Path, overwrite: bool, fill: Callable[[h5py.File], None]) -> None:

@@ -230,8 +230,11 @@ class _Checker(FileChecker):
         act = self.group("/setup/actuator")
         point = self.attr_int(act, "point")
         direction = self.attr_text(act, "direction")
+        static = 0.0
+        if "static_stiffness_n_per_m" in act.attrs:
+            static = self.attr(act, "static_stiffness_n_per_m")
         try:
-            return Actuator(point, direction)
+            return Actuator(point, direction, static)
         except FieldValueError as exc:
             self.fail(act.name, exc.expected, exc.found, exc.field)
 

@@ -127,18 +127,32 @@ class Actuator:
         Measurement point number of the drive point (>= 0).
     direction : str
         Direction of the applied force, one of the channel directions.
+    static_stiffness_n_per_m : float
+        Stiffness with which the shaker holds the drive point at its mean position (its
+        suspension in series with the stinger) [N/m]; 0 when unknown or negligible. The mean
+        force is not measured (AC-coupled channels), so a model needs this to place the mean
+        response of a structure with a one-sided contact (optional attribute
+        ``static_stiffness_n_per_m`` of ``/setup/actuator``; absent means 0).
     """
 
     point: int
     direction: str
+    static_stiffness_n_per_m: float = 0.0
 
     def __post_init__(self) -> None:
         point = check_int(self.point, owner="Actuator", field="point", minimum=0)
         direction = check_text(
             self.direction, owner="Actuator", field="direction", allowed=DIRECTIONS
         )
+        static = check_float(
+            self.static_stiffness_n_per_m,
+            owner="Actuator",
+            field="static_stiffness_n_per_m",
+            minimum=0.0,
+        )
         object.__setattr__(self, "point", point)
         object.__setattr__(self, "direction", direction)
+        object.__setattr__(self, "static_stiffness_n_per_m", static)
 
 
 def check_channels(channels: Iterable[ChannelInfo]) -> tuple[ChannelInfo, ...]:

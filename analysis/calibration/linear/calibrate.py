@@ -232,8 +232,10 @@ def calibrate_linear(
     model_s = model.add_masses(masses) if masses else model
     names = _parameter_names(model, st.parameters)
     space = ParameterSpace.from_model(model_s, names)
-    f, H, band = _band(run_frfs, st)
-    fit = identify_modes(f, H, band)
+    f, H, sH, g2, band = _band(run_frfs, st)
+    # Weighted by the H1 standard errors (starting poles by the coherence): the noisy lines
+    # away from the resonances must not pull the poles.
+    fit = identify_modes(f, H, band, weights=1.0 / np.maximum(sH, 1e-300), start_weights=g2)
     n_min = len(names) if st.min_modes is None else st.min_modes
     if fit.n_modes < n_min:
         raise CalibrationError(
@@ -350,7 +352,7 @@ def _band(run: RunFRFs, st: LinearCalibrationSettings):
             f"{run.source}: only {np.count_nonzero(keep)} frequencies in {band[0]:g}-"
             f"{band[1]:g} Hz (with coherence >= {st.min_coherence:g})"
         )
-    return f[keep], run.H[keep], band
+    return f[keep], run.H[keep], run.std()[keep], run.coherence[keep], band
 
 
 def _pair_modes(model: Model, fit, rows: list[int], band, mac_min: float):

@@ -20,7 +20,6 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg as sla
 
 __all__ = ["StablePole", "lscf_poles", "stable_poles", "starting_poles"]
 
@@ -52,27 +51,45 @@ class StablePole:
         return complex(-self.zeta * w, w * np.sqrt(1 - self.zeta**2))
 
 
-def _reduced_matrices(omega: np.ndarray, H: np.ndarray, order: int, T: float) -> np.ndarray:
-    """Reduced normal matrix of the denominator, shape (order + 1, order + 1)."""
+def _reduced_r(
+    omega: np.ndarray, H: np.ndarray, order: int, T: float, weights: np.ndarray | None = None
+) -> np.ndarray:
+    """Triangular factor of the denominator's reduced problem, shape (order + 1, order + 1).
+
+    Channel by channel the numerator is projected out of the equation error (QR of the
+    numerator basis, not the normal equations: for a good fit the reduced normal matrix is a
+    small difference of large terms); the projected denominator columns of all channels are
+    stacked and reduced to one triangular factor ``R``. The order-``n`` denominator solves
+    ``R[:n, :n] a = -R[:n, n]`` (leading columns of a QR factor are the QR factor of the
+    leading columns).
+
+    Each channel is scaled to unit RMS magnitude; ``weights`` ``W`` (nf, C), if given, then
+    scale the equation error of channel ``o`` at each frequency by ``W[:, o]`` (e.g. the
+    coherence, so noisy lines and channels count less). Without them every line counts alike.
+    """
     X = np.exp(-1j * np.outer(omega, np.arange(order + 1)) * T)  # (nf, n+1)
-    R0 = (X.conj().T @ X).real
-    try:
-        cho = sla.cho_factor(R0)
-        R0_inv = sla.cho_solve(cho, np.eye(R0.shape[0]))
-    except np.linalg.LinAlgError:  # a narrow band far from 0 Hz at a high order
-        R0_inv = sla.pinvh(R0)
-    Mred = np.zeros_like(R0)
+    blocks = []
     for o in range(H.shape[1]):
         h = H[:, o]
-        w2 = 1.0 / max(float(np.mean(np.abs(h) ** 2)), 1e-300)  # channels weighted equally
-        S = -(X.conj().T @ (h[:, None] * X)).real
-        Tm = (X.conj().T @ ((np.abs(h) ** 2)[:, None] * X)).real
-        Mred += w2 * (Tm - S.T @ R0_inv @ S)
-    return Mred
+        w = np.full(h.size, 1.0 / max(float(np.sqrt(np.mean(np.abs(h) ** 2))), 1e-300))
+        if weights is not None:
+            w = w * np.asarray(weights[:, o], dtype=float)
+        A = w[:, None] * X
+        B = -(w * h)[:, None] * X
+        Ar = np.concatenate([A.real, A.imag])
+        Br = np.concatenate([B.real, B.imag])
+        Q, _ = np.linalg.qr(Ar)
+        Bp = Br - Q @ (Q.T @ Br)
+        blocks.append(np.linalg.qr(Bp, mode="r"))
+    return np.linalg.qr(np.concatenate(blocks), mode="r")
 
 
 def lscf_poles(
-    frequency_hz: np.ndarray, H: np.ndarray, orders: list[int], f_max_hz: float
+    frequency_hz: np.ndarray,
+    H: np.ndarray,
+    orders: list[int],
+    f_max_hz: float,
+    weights: np.ndarray | None = None,
 ) -> dict[int, np.ndarray]:
     """Poles of LSCF models of the given orders.
 
@@ -85,6 +102,8 @@ def lscf_poles(
         Denominator orders (number of poles including conjugates).
     f_max_hz : float
         Sets the sampling interval of the z-domain, ``T = 1 / (2 f_max)``; above the band.
+    weights : ndarray, shape (nf, C), optional
+        Equation-error weights on top of the channel scaling (e.g. the coherence).
 
     Returns
     -------
@@ -94,14 +113,10 @@ def lscf_poles(
     omega = 2 * np.pi * np.asarray(frequency_hz, dtype=float)
     T = 1.0 / (2.0 * f_max_hz)
     n_max = max(orders)
-    M_full = _reduced_matrices(omega, np.asarray(H), n_max, T)
+    R = _reduced_r(omega, np.asarray(H), n_max, T, weights)
     out = {}
     for n in orders:
-        M = M_full[: n + 1, : n + 1]
-        try:
-            a = np.linalg.solve(M[:n, :n], -M[:n, n])
-        except np.linalg.LinAlgError:
-            a = np.linalg.lstsq(M[:n, :n], -M[:n, n], rcond=None)[0]
+        a = np.linalg.lstsq(R[:n, :n], -R[:n, n], rcond=None)[0]
         coeffs = np.append(a, 1.0)  # ascending powers of z
         roots = np.roots(coeffs[::-1])
         roots = roots[np.isfinite(roots) & (np.abs(roots) > 0)]
@@ -126,10 +141,11 @@ def stable_poles(
     *,
     max_order: int = 48,
     zeta_max: float = 0.2,
-    tol_frequency: float = 0.01,
-    tol_zeta: float = 0.2,
+    tol_frequency: float = 0.02,
+    tol_zeta: float = 0.5,
     tol_group: float = 0.005,
     min_fraction: float = 0.3,
+    weights: np.ndarray | None = None,
 ) -> list[StablePole]:
     """Poles stable over LSCF model orders 4, 6, ..., ``max_order``.
 
@@ -146,6 +162,8 @@ def stable_poles(
     band_hz : (float, float)
         Only poles with natural frequency inside are returned (stability is judged over all
         fitted frequencies, so a pole on the band's edge is not lost).
+    weights : ndarray, shape (nf, C), optional
+        See :func:`lscf_poles`.
 
     Returns
     -------
@@ -153,7 +171,7 @@ def stable_poles(
     """
     orders = list(range(4, max_order + 1, 2))
     f_max = float(np.max(frequency_hz)) * 1.05
-    poles = lscf_poles(frequency_hz, H, orders, f_max)
+    poles = lscf_poles(frequency_hz, H, orders, f_max, weights)
     stable: list[tuple[float, float]] = []
     prev = np.zeros((0, 2))
     fitted = (float(np.min(frequency_hz)), float(np.max(frequency_hz)))
@@ -188,6 +206,7 @@ def starting_poles(
     max_order: int = 32,
     zeta_max: float = 0.2,
     margin: float = 0.02,
+    weights: np.ndarray | None = None,
 ) -> list[StablePole]:
     """Stable poles over a wide band, found sub-band by sub-band.
 
@@ -202,6 +221,8 @@ def starting_poles(
     frequency_hz : ndarray, shape (nf,), Hz
     H : ndarray, shape (nf, C), complex
     band_hz : (float, float)
+    weights : ndarray, shape (nf, C), optional
+        See :func:`lscf_poles`.
 
     Returns
     -------
@@ -219,7 +240,8 @@ def starting_poles(
         if np.count_nonzero(m) < 8:
             continue
         core = (edges[k] / (1 + margin), edges[k + 1] * (1 + margin))
-        poles = stable_poles(f[m], H[m], core, max_order=max_order, zeta_max=zeta_max)
+        W = None if weights is None else np.asarray(weights)[m]
+        poles = stable_poles(f[m], H[m], core, max_order=max_order, zeta_max=zeta_max, weights=W)
         found += [(p.frequency_hz, k, p) for p in poles]
     # a pole near an octave edge may come from both neighbours: keep the better supported
     out: list[tuple[float, int, StablePole]] = []

@@ -285,6 +285,7 @@ def identify_modes(
     band_hz: tuple[float, float] | None = None,
     *,
     weights: np.ndarray | None = None,
+    start_weights: np.ndarray | None = None,
     max_order: int = 32,
     zeta_max: float = 0.2,
     min_contribution: float = 0.05,
@@ -301,6 +302,10 @@ def identify_modes(
         Default: the positive frequencies of ``frequency_hz``.
     weights : ndarray, shape (nf, C), optional
         Default ``1 / |H|`` (relative errors).
+    start_weights : ndarray, shape (nf, C), optional
+        Weights of the LSCF equation errors for the starting poles, e.g. the coherence (absolute
+        errors: relative weights would let the anti-resonances and the noise floor dominate the
+        linearised fit). Default uniform.
     max_order : int
         Highest LSCF model order per sub-band.
     zeta_max : float
@@ -324,7 +329,8 @@ def identify_modes(
         raise ValueError(f"band {lo:g}-{hi:g} Hz holds {np.count_nonzero(sel)} frequencies")
     f, H = f[sel], H[sel]
     W = None if weights is None else np.asarray(weights, dtype=float)[sel]
-    start = starting_poles(f, H, (lo, hi), max_order=max_order, zeta_max=zeta_max)
+    Ws = None if start_weights is None else np.asarray(start_weights, dtype=float)[sel]
+    start = starting_poles(f, H, (lo, hi), max_order=max_order, zeta_max=zeta_max, weights=Ws)
     f0 = [p.frequency_hz for p in start]
     z0 = [p.zeta for p in start]
     fit = fit_poles(f, H, f0, z0, band_hz=(lo, hi), weights=W)

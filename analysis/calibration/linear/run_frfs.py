@@ -49,6 +49,8 @@ class RunFRFs:
     drive_direction : str
     source : str
         The file.
+    n_averages : int
+        Averages of the H1 estimate (0 if unknown).
     """
 
     frequency_hz: np.ndarray
@@ -60,6 +62,17 @@ class RunFRFs:
     drive_point: int
     drive_direction: str
     source: str
+    n_averages: int = 0
+
+    def std(self) -> np.ndarray:
+        """Standard error of ``H`` from the coherence, shape (nf, C), m/N.
+
+        ``|H| sqrt((1 - gamma^2) / (2 n gamma^2))`` (Bendat and Piersol, *Random Data*, 4th
+        ed., sec. 9.2.4), with gamma^2 kept within [1e-6, 1 - 1e-9] and one average if unknown.
+        """
+        g2 = np.clip(self.coherence, 1e-6, 1.0 - 1e-9)
+        n = max(self.n_averages, 1)
+        return np.abs(self.H) * np.sqrt((1.0 - g2) / (2.0 * n * g2))
 
     def dofs(self, model: Model) -> tuple[list[int], int]:
         """Row DOF indices of the channels and the drive DOF in ``model``'s assembly."""
@@ -152,6 +165,7 @@ def load_random_run(run: RandomData | str | PathLike[str], model: Model) -> RunF
         drive_point=int(act.point),
         drive_direction=act.direction.lstrip("-"),
         source=str(data.path),
+        n_averages=int(data.n_averages),
     )
 
 
