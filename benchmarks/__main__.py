@@ -17,6 +17,7 @@ SCENARIOS = {
     "calibrate": "benchmarks.calibrate",
     "mhb": "benchmarks.mhb",
     "planning": "benchmarks.planning",
+    "service": "benchmarks.service",
 }
 
 

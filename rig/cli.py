@@ -8,7 +8,10 @@ export-uff  export a measurement file's FRFs to UFF 58 (``rig export-uff run.h5 
 plans       list the built-in plans
 backends    list the DAQ backends and check that each can be opened here
 workflow    the paper's whole workflow on a backend (simulated by default)
+gui         the lab GUI: acquisition window and model workbench (simulated rig by default)
 amplifier   talk to the serial power amplifier (status, enable, mute, gain, clear)
+service     the acquisition service that owns the rig (``rig service start|stop|status``)
+submit      queue a plan on the service; list, watch, pause, resume, abort, result: its runs
 
 Every command has ``--help``.
 """
@@ -23,6 +26,7 @@ import sys
 from rig.backends import available_backends, open_backend
 from rig.backends.protocol import BackendError
 from rig.cli_run import EXIT_INTERRUPTED, EXIT_USAGE, add_run_commands
+from rig.cli_service import add_service_commands
 
 
 def cmd_backends(args) -> dict:
@@ -91,6 +95,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--json", action="store_true", help="print one JSON object")
     sp.set_defaults(func=cmd_amplifier)
     add_run_commands(sub)
+    add_service_commands(sub)
 
     sp = sub.add_parser(
         "workflow",
@@ -106,6 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--starts", type=int, default=100, help="Latin hypercube starts")
     sp.add_argument("--json", action="store_true", help="print one JSON object")
     sp.set_defaults(func=cmd_workflow)
+    add_gui_command(sub)
     return p
 
 
@@ -125,6 +131,57 @@ def cmd_workflow(args) -> dict:
         "calibration": summary["calibration"]["parameters"],
         "validation_passed": summary["validation"]["passed"],
     }
+
+
+def add_gui_command(sub) -> None:
+    """Add ``gui``: the GUI module is imported only when the command runs (it needs Qt)."""
+    sp = sub.add_parser(
+        "gui",
+        help="the lab GUI: acquisition window, run browser and model workbench",
+        description="Set up, run and watch stepped-sine tests (on the simulated rig in this "
+        "process by default, or on the acquisition service with --service), browse "
+        "measurement files, and compare, diagnose and augment a model in the workbench.",
+    )
+    sp.add_argument(
+        "--backend", choices=("sim", "ni"), default="sim", help="DAQ backend (default sim)"
+    )
+    sp.add_argument("--plan", help="plan to preselect: built-in name or file (default quick)")
+    sp.add_argument("--setup", help="lab setup to preselect (default: the plan's)")
+    sp.add_argument("--truth", help="simulated rig: truth structure name or file")
+    sp.add_argument("--seed", type=int, help="simulated rig: noise seed")
+    sp.add_argument("--out", help="measurement file of the next run")
+    sp.add_argument("--open", dest="open_file", metavar="FILE", help="show FILE in the browser")
+    sp.add_argument("--model", help="model file for the workbench")
+    sp.add_argument(
+        "--service",
+        action="store_true",
+        help="run tests on the acquisition service ('rig service start') instead of here",
+    )
+    sp.add_argument("--service-dir", help="service directory (default as 'rig service')")
+    sp.add_argument("--url", help="service address http://HOST:PORT (default from the directory)")
+    sp.set_defaults(func=cmd_gui)
+
+
+def cmd_gui(args) -> int:
+    try:
+        from rig.gui.app import run_gui
+    except ImportError as exc:
+        raise RuntimeError(
+            f"the GUI needs PySide6 and pyqtgraph ({exc}): pip install 'clearance-rig[gui]'"
+        ) from exc
+    return run_gui(
+        backend=args.backend,
+        plan=args.plan,
+        setup=args.setup,
+        truth=args.truth,
+        seed=args.seed,
+        out=args.out,
+        open_file=args.open_file,
+        model=args.model,
+        service=args.service or bool(args.url) or bool(args.service_dir),
+        service_dir=args.service_dir,
+        service_url=args.url,
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,148 @@
+"""The plan editor: frequency ranges, levels, orders, acquisition, control, limits, pretest.
+
+The form's sections are generated from the plan's settings dataclasses
+(:mod:`rig.plan_settings`, :class:`rig.control.force_controller.ControlSettings`); the plan is
+built with :func:`rig.plans.plan_from_dict`, the reader of plan files, so the form accepts what
+a plan file accepts and says what is wrong the way the loader says it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from rig.control.force_controller import ControlSettings
+from rig.gui.forms import RowsTable, SettingsForm
+from rig.gui.settings_editor import SettingsEditor
+from rig.gui.settings_fields import Field, dataclass_fields
+from rig.plan_settings import (
+    DIRECTIONS,
+    AcquisitionSettings,
+    ControlPolicy,
+    ExcitationSettings,
+    FrequencyRange,
+    Limits,
+    PretestSettings,
+    RandomAcquisition,
+    RandomExcitation,
+    ResponseLimit,
+)
+from rig.plans import Plan, SteppedSinePlan, builtin_plans, describe_plan, load_plan, plan_from_dict
+from rig.signals.random import RANDOM_KINDS
+
+__all__ = ["PlanEditor"]
+
+_NESTED = ("excitation", "frequencies", "acquisition", "control", "limits", "pretest")
+
+
+def _general() -> list[Field]:
+    return dataclass_fields(
+        SteppedSinePlan,
+        skip=_NESTED,
+        kinds={"name": "text", "description": "text", "setup": "text", "points": "integers"},
+        labels={"setup": "setup expected", "points": "points recorded"},
+    )
+
+
+def _limits(form: SettingsForm) -> None:
+    form.add_rows(
+        "Limits",
+        "limits.response",
+        "response limits (alarm warns, abort ends the run)",
+        RowsTable(dataclass_fields(ResponseLimit)),
+    )
+
+
+def stepped_form() -> SettingsForm:
+    """The form of a stepped-sine plan."""
+    control = dataclass_fields(
+        ControlPolicy,
+        "control",
+        skip=("settings",),
+        choices={"on_divergence": ("abort", "record")},
+    ) + dataclass_fields(ControlSettings, "control", skip=("orders", "max_drive_v"))
+    form = SettingsForm(
+        [
+            ("Plan", _general()),
+            (
+                "Excitation",
+                dataclass_fields(
+                    ExcitationSettings,
+                    "excitation",
+                    kinds={"orders": "words", "phases_deg": "numbers"},
+                ),
+            ),
+            (
+                "Frequencies",
+                [
+                    Field(
+                        "frequencies.direction",
+                        "sweep direction",
+                        "choice",
+                        DIRECTIONS,
+                        "sweep direction at each level",
+                    )
+                ],
+            ),
+            ("Limits", dataclass_fields(Limits, "limits", skip=("response",))),
+            ("Acquisition", dataclass_fields(AcquisitionSettings, "acquisition")),
+            ("Force control", control),
+            ("Pre-test", dataclass_fields(PretestSettings, "pretest")),
+        ]
+    )
+    form.add_rows(
+        "Frequencies",
+        "frequencies.ranges",
+        "ranges (their union is swept; shared frequencies once)",
+        RowsTable(dataclass_fields(FrequencyRange)),
+    )
+    _limits(form)
+    return form
+
+
+def random_form() -> SettingsForm:
+    """The form of a random (linear) plan."""
+    form = SettingsForm(
+        [
+            ("Plan", _general()),
+            (
+                "Excitation",
+                dataclass_fields(
+                    RandomExcitation, "excitation", choices={"signal": tuple(RANDOM_KINDS)}
+                ),
+            ),
+            ("Limits", dataclass_fields(Limits, "limits", skip=("response",))),
+            ("Acquisition", dataclass_fields(RandomAcquisition, "acquisition")),
+            ("Pre-test", dataclass_fields(PretestSettings, "pretest")),
+        ]
+    )
+    _limits(form)
+    return form
+
+
+class PlanEditor(SettingsEditor):
+    """Choose, open, edit, check and save a test plan."""
+
+    source = "plan form"
+    what = "plan"
+
+    def __init__(self, parent=None) -> None:
+        super().__init__(parent)
+        self.add_form("stepped-sine", stepped_form())
+        self.add_form("random", random_form())
+
+    def builtins(self) -> Mapping[str, Path]:
+        return builtin_plans()
+
+    def read(self, name_or_path: str) -> Plan:
+        return load_plan(name_or_path)
+
+    def kind_of(self, value: Plan) -> str:
+        return value.kind
+
+    def build(self, doc: dict[str, Any]) -> Plan:
+        return plan_from_dict({**doc, "kind": self.kind}, self.source)
+
+    def describe(self, value: Plan) -> str:
+        return describe_plan(value)

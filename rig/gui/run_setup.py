@@ -1,0 +1,309 @@
+"""Setting up a run: the backend (simulated rig or NI), the lab setup, the plan, the file.
+
+:class:`RunSetupPanel` has three tabs: *Run* (backend, file, options), *Lab setup*
+(:class:`~rig.gui.setup_editor.SetupEditor`) and *Plan* (:class:`~rig.gui.plan_editor.PlanEditor`).
+It re-checks everything a moment after every edit: the plan and the setup by their loaders,
+the plan's points against the setup's channels (:meth:`rig.setup.LabSetup.channels_for_points`);
+a problem is shown next to the field that causes it and the run cannot start until it is fixed.
+:meth:`RunSetupPanel.request` gives the :class:`~rig.gui.controller.RunRequest` to start.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+from typing import Any
+
+from PySide6 import QtCore, QtWidgets
+
+from rig.gui.controller import RunRequest
+from rig.gui.plan_editor import PlanEditor
+from rig.gui.setup_editor import SetupEditor
+from rig.gui.style import ALARM, OK
+from rig.plans import Plan
+from rig.setup import LabSetup, load_setup, setup_from_dict
+from rig.tomlconfig import ConfigError
+
+__all__ = ["RunSetupPanel", "simulated_truths"]
+
+
+def simulated_truths() -> list[str]:
+    """Names of the simulated rig's truth structures, if the simulator is installed."""
+    spec = importlib.util.find_spec("sim_backend")
+    if spec is None or not spec.submodule_search_locations:
+        return ["reference"]
+    names: set[str] = set()
+    for folder in spec.submodule_search_locations:
+        names |= {p.stem for p in (Path(folder) / "truths").glob("*.toml")}
+    return ["reference", *sorted(names - {"reference"})]
+
+
+class BackendBox(QtWidgets.QWidget):
+    """Backend and file of a run."""
+
+    changed = QtCore.Signal()
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.sim = QtWidgets.QRadioButton("simulated rig (in this process)")
+        self.ni = QtWidgets.QRadioButton("NI-DAQmx device")
+        self.sim.setChecked(True)
+        self.truth = QtWidgets.QComboBox()
+        self.truth.setEditable(True)
+        self.truth.addItems(simulated_truths())
+        self.truth.setToolTip("the structure the simulated rig hides (a name or a truth file)")
+        self.seed = QtWidgets.QLineEdit()
+        self.seed.setPlaceholderText("the truth's")
+        self.seed.setToolTip("noise seed of the simulated rig (empty: the truth's own)")
+        self.realtime = QtWidgets.QCheckBox("pace to the clock (as slow as a real test)")
+        self.device = QtWidgets.QLineEdit()
+        self.device.setPlaceholderText("the setup's DAQ device")
+        self.path = QtWidgets.QLineEdit("run.h5")
+        browse = QtWidgets.QPushButton("Browse…")
+        browse.clicked.connect(self._browse)
+        self.overwrite = QtWidgets.QCheckBox("replace an existing file")
+        self.pause_on_fault = QtWidgets.QCheckBox(
+            "pause on recoverable faults (clipping, silent sensor, lost force, amplifier overload)"
+        )
+        self.pause_on_fault.setChecked(True)
+        self.resume_note = QtWidgets.QLabel("")
+        self.resume_note.setWordWrap(True)
+        self.resume_note.setStyleSheet("color: #0072B2; font-weight: bold;")
+        self.cancel_resume = QtWidgets.QPushButton("New run instead")
+        self.cancel_resume.hide()
+        self.path_error = QtWidgets.QLabel("")
+        self.path_error.setStyleSheet(f"color: {ALARM};")
+        self.path_error.setWordWrap(True)
+        self.path_error.hide()
+
+        backend = QtWidgets.QGroupBox("Backend")
+        form = QtWidgets.QFormLayout(backend)
+        form.addRow(self.sim)
+        form.addRow("truth structure", self.truth)
+        form.addRow("noise seed", self.seed)
+        form.addRow(self.realtime)
+        form.addRow(self.ni)
+        form.addRow("device", self.device)
+        out = QtWidgets.QGroupBox("Measurement file")
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(self.path, 1)
+        row.addWidget(browse)
+        form2 = QtWidgets.QFormLayout(out)
+        form2.addRow("file", row)
+        form2.addRow("", self.path_error)
+        form2.addRow(self.overwrite)
+        form2.addRow(self.pause_on_fault)
+        form2.addRow(self.resume_note)
+        form2.addRow(self.cancel_resume)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.addWidget(backend)
+        layout.addWidget(out)
+        layout.addStretch(1)
+        for w in (self.sim, self.ni, self.realtime, self.overwrite, self.pause_on_fault):
+            w.toggled.connect(self._changed)
+        for w in (self.seed, self.device, self.path):
+            w.textChanged.connect(self._changed)
+        self.truth.currentTextChanged.connect(self._changed)
+        self._changed()
+
+    def set_remote(self, where: str) -> None:
+        """Runs go to ``where``, which owns the rig: its backend and setup apply."""
+        for w in (self.sim, self.ni, self.truth, self.seed, self.realtime, self.device):
+            w.setEnabled(False)
+        self.resume_note.setText(
+            f"runs on {where}: its backend and lab setup apply; the plan is sent and the file "
+            "is written in its results folder under this file name"
+        )
+        self._remote = True
+
+    def _changed(self, *_args) -> None:
+        if getattr(self, "_remote", False):
+            self.changed.emit()
+            return
+        sim = self.sim.isChecked()
+        for w in (self.truth, self.seed, self.realtime):
+            w.setEnabled(sim)
+        self.device.setEnabled(not sim)
+        self.changed.emit()
+
+    def _browse(self) -> None:
+        name, _ = QtWidgets.QFileDialog.getSaveFileName(
+            self, "Measurement file", self.path.text(), "HDF5 files (*.h5)"
+        )
+        if name:
+            self.path.setText(name)
+
+    @property
+    def backend(self) -> str:
+        return "sim" if self.sim.isChecked() else "ni"
+
+    def options(self) -> dict[str, Any]:
+        """Backend options (raises ValueError for a seed that is not an integer)."""
+        if self.backend == "ni":
+            device = self.device.text().strip()
+            return {"device": device} if device else {}
+        options: dict[str, Any] = {"truth": self.truth.currentText().strip() or "reference"}
+        seed = self.seed.text().strip()
+        if seed:
+            try:
+                options["seed"] = int(seed)
+            except ValueError:
+                raise ValueError(f"noise seed: expected an integer, got {seed!r}") from None
+        if self.realtime.isChecked():
+            options["realtime"] = True
+        return options
+
+
+class RunSetupPanel(QtWidgets.QTabWidget):
+    """Backend, setup and plan of the next run, checked as they are edited.
+
+    Signals
+    -------
+    validity_changed(bool, str)
+        Whether a run can start, and the first problem otherwise.
+    """
+
+    validity_changed = QtCore.Signal(bool, str)
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.run_box = BackendBox()
+        self.setup_editor = SetupEditor()
+        self.plan_editor = PlanEditor()
+        self.addTab(self.run_box, "Run")
+        self.addTab(self.setup_editor, "Lab setup")
+        self.addTab(self.plan_editor, "Plan")
+        self.status = QtWidgets.QLabel("")
+        self.status.setWordWrap(True)
+        self.plan: Plan | None = None
+        self.setup: LabSetup | None = None
+        self.valid = False
+        self.problem = ""
+        self.settings_problem = ""
+        self.resume_path: Path | None = None
+        self._timer = QtCore.QTimer(self)
+        self._timer.setSingleShot(True)
+        self._timer.setInterval(250)
+        self._timer.timeout.connect(self.check)
+        for signal in (self.run_box.changed, self.setup_editor.edited, self.plan_editor.edited):
+            signal.connect(self._timer.start)
+        self.plan_editor.loaded.connect(self._plan_loaded)
+        self.run_box.cancel_resume.clicked.connect(self.cancel_resume)
+        self.setup_editor.load("reference")
+        self.plan_editor.load("quick")
+
+    def _plan_loaded(self, plan: Plan) -> None:
+        """A plan names the setup it expects: load that one (as the command line does)."""
+        if self.setup_editor.value is not None and self.setup_editor.value.name == plan.setup:
+            return
+        try:
+            load_setup(plan.setup)
+        except ConfigError:
+            return  # the operator picks a setup
+        self.setup_editor.load(plan.setup)
+
+    # -- checking --------------------------------------------------------------------------
+    def check(self) -> bool:
+        """Check setup, plan and file now; show problems at their fields."""
+        self._timer.stop()
+        setup, setup_error = self.setup_editor.check()
+        plan, plan_error = self.plan_editor.check()
+        problem = setup_error or plan_error
+        if setup is not None and plan is not None:
+            try:
+                setup.channels_for_points(plan.points)
+            except ValueError as exc:
+                self.plan_editor.form.show_error("points", str(exc))
+                problem = str(exc)
+        try:
+            self.run_box.options()
+        except ValueError as exc:
+            problem = problem or str(exc)
+        self.settings_problem = problem
+        problem = problem or self._check_path()
+        self.plan, self.setup = plan, setup
+        self.valid = not problem
+        self.problem = problem
+        if self.valid:
+            self.status.setText(
+                f"<span style='color:{OK}'>ready: {plan.name} on {setup.name}</span>"
+            )
+        else:
+            self.status.setText(f"<span style='color:{ALARM}'>not ready: {problem}</span>")
+        self.validity_changed.emit(self.valid, problem)
+        return self.valid
+
+    def _check_path(self) -> str:
+        box = self.run_box
+        text = box.path.text().strip()
+        problem = ""
+        if self.resume_path is not None:
+            problem = ""
+        elif not text:
+            problem = "name the measurement file"
+        elif Path(text).exists() and not box.overwrite.isChecked():
+            problem = f"{text} exists: tick 'replace an existing file' or choose another name"
+        elif not Path(text).resolve().parent.is_dir():
+            problem = f"the folder of {text} does not exist"
+        box.path_error.setText(problem)
+        box.path_error.setVisible(bool(problem))
+        return problem
+
+    # -- resume ----------------------------------------------------------------------------
+    def set_resume(self, path: Path, data) -> None:
+        """Complete an unfinished file: its stored plan and setup, its simulated rig."""
+        from rig.plans import plan_from_dict
+
+        plan = plan_from_dict(data.config["plan"], f"plan stored in {path}")
+        setup = setup_from_dict(data.setup, f"setup stored in {path}")
+        self.plan_editor.set_value(plan, f"stored in {path}")
+        self.setup_editor.set_value(setup, f"stored in {path}")
+        run = data.config.get("run", {}) if isinstance(data.config, dict) else {}
+        options = run.get("backend_options", {}) if run.get("backend") == "sim" else {}
+        if isinstance(options.get("truth"), str):
+            self.run_box.truth.setCurrentText(options["truth"])
+        if isinstance(options.get("seed"), int):
+            self.run_box.seed.setText(str(options["seed"]))
+        self.resume_path = Path(path)
+        self.run_box.path.setText(str(path))
+        self.run_box.path.setEnabled(False)
+        self.run_box.resume_note.setText(
+            f"completing {Path(path).name}: {data.n_steps} of {plan.n_steps} steps on disk; "
+            "plan and setup as stored in the file"
+        )
+        self.run_box.cancel_resume.show()
+        for editor in (self.plan_editor, self.setup_editor):
+            editor.form.setEnabled(False)
+        self.setCurrentWidget(self.run_box)
+        self.check()
+
+    def cancel_resume(self) -> None:
+        self.resume_path = None
+        self.run_box.path.setEnabled(True)
+        self.run_box.resume_note.setText("")
+        self.run_box.cancel_resume.hide()
+        for editor in (self.plan_editor, self.setup_editor):
+            editor.form.setEnabled(True)
+        self.check()
+
+    # -- the request -----------------------------------------------------------------------
+    def request(self, *, pretest_only: bool = False) -> RunRequest:
+        """The run to start (raises ValueError when something is not ready; a pretest needs no
+        file)."""
+        self.check()
+        problem = self.settings_problem if pretest_only else self.problem
+        if problem:
+            raise ValueError(problem)
+        box = self.run_box
+        resume = self.resume_path is not None
+        return RunRequest(
+            plan=self.plan,
+            setup=self.setup,
+            path=self.resume_path if resume else Path(box.path.text().strip()),
+            backend=box.backend,
+            backend_options=box.options(),
+            overwrite=box.overwrite.isChecked(),
+            resume=resume and not pretest_only,
+            pause_on_fault=box.pause_on_fault.isChecked(),
+            pretest_only=pretest_only,
+        )
