@@ -143,7 +143,9 @@ def _build(kind: str, values: dict) -> NonlinearElement:
 
 
 def test_examples_cover_every_registered_kind():
-    assert {kind for kind, *_ in EXAMPLES} == set(ELEMENT_TYPES)
+    # the library's own kinds (a package may register more, e.g. the simulator's Jenkins element)
+    library = {k for k, cls in ELEMENT_TYPES.items() if cls.__module__.startswith("analysis.")}
+    assert {kind for kind, *_ in EXAMPLES} == library
 
 
 @pytest.mark.parametrize(("kind", "values", "u_scale", "v_scale"), EXAMPLES, ids=EXAMPLE_IDS)
