@@ -186,8 +186,9 @@ def test_frfs_agree_with_the_truths_mhb(tmp_path):
     """Acceptance: H^nu measured on the simulated rig against the truth's multi-harmonic
     balance driven by the measured force phasors, within the measurement's standard errors
     (3 sigma) plus a slack for what the file does not hold (force harmonics above the third):
-    2 % of the fundamental response in order 1 and 0.5 % of it in orders 2 and 3. Levels 2 and 8 N, through the contact
-    resonance (24.5-27 Hz) on its upper branch, below and above it."""
+    2 % of the fundamental response in order 1 and 0.5 % of it in orders 2 and 3. Levels 2
+    and 8 N, through the contact resonance (24.5-27 Hz) on its upper branch, below and above
+    it."""
     setup = setup_at()
     plan = reduced_plan(
         levels_n=(2.0, 8.0), ranges=((21.0, 24.0, 1.5), (24.5, 27.0, 0.5), (30.0, 30.0, 1.0))
