@@ -12,6 +12,9 @@ calibrate        nonlinear calibration of a stepped-sine run (LHS + Levenberg-Ma
 crossval         k-fold cross-validation of a calibration
 validate         prediction of a held-out level with uncertainty bands, pass/fail
 report           one report (HTML + Markdown) from a calibration folder
+compare          residual blocks and maps of a model against a stepped-sine run
+diagnose         which physical effect the model misses (evidence, candidates, ranking)
+augment          add the chosen effect, recalibrate, show the error falling
 demo             the analysis part of the paper on the published model (figures + summary)
 """
 
@@ -315,6 +318,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_plan_parser(sub)
     add_linear_parser(sub)
     add_calibration(sub)
+
+    from analysis.diagnosis.cli import add_parsers as add_diagnosis
+
+    add_diagnosis(sub)
 
     sp = sub.add_parser("demo", help="the analysis part of the paper on its published model")
     common(sp, model=False)

@@ -210,6 +210,8 @@ def load_truth(name_or_path: str | Path = "reference") -> Truth:
 @functools.lru_cache(maxsize=32)
 def _load(path: Path, mtime_ns: int) -> Truth:
     """Read a truth file (cached per path and modification time; a Truth is immutable)."""
+    import sim_backend.hysteresis  # noqa: F401  (registers the simulator-only element kinds)
+
     model = load_model(path, allow_truth=True)
     source = str(path)
     raw = model.truth

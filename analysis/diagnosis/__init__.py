@@ -2,13 +2,18 @@
 
 >>> from analysis.diagnosis import compare, diagnose, augment        # doctest: +SKIP
 >>> result = diagnose(model, data, linear_run="random.h5")             # doctest: +SKIP
->>> new = augment(model, data, result.group[0].candidate, out="new.toml")  # doctest: +SKIP
+>>> best = result.group[0]                                              # doctest: +SKIP
+>>> values, known = best.start_values()                                 # doctest: +SKIP
+>>> new = augment(model, data, best.candidate, values=values, known=known,
+...               linear_run="random.h5", out="new.toml")               # doctest: +SKIP
 
 Modules, in the order data flows:
 
 branches
     :class:`BranchMatchedPredictor`: model FRFs on the branch the test was on (a jump the
-    rig made early is not a model error).
+    rig made early is not a model error), the compared orders (an order the test holds at
+    zero force drives the model but is not compared), standard errors with the force's
+    error carried through the model.
 compare
     Normalised residuals, blocks by sensor/order/level/band with family-wise verdicts, maps.
 signatures
@@ -19,12 +24,16 @@ candidates
     written into a model file.
 screen
     The harmonic-domain force estimate and least-squares law fits, ranked by BIC.
+linear_screen
+    Linear candidates (mass, spring, compliant joint) on the linear test.
 refit
     Recalibration on the measured branch (several starts, Levenberg-Marquardt).
 verify
     Candidates recalibrated in the full model (picklable jobs).
 diagnose
     Compare, evidence, screen, verify, rank, verdict: :func:`diagnose`.
+result
+    The diagnosis' settings, ranking and verdict in words.
 discriminate
     The measurement that separates tied candidates (planning sweeps, prediction differences
     over the noise).
@@ -38,8 +47,10 @@ from analysis.diagnosis.augment import AugmentResult, augment
 from analysis.diagnosis.branches import BranchMatchedPredictor
 from analysis.diagnosis.candidates import Candidate, Law, Location, default_candidates
 from analysis.diagnosis.compare import Block, Comparison, compare
-from analysis.diagnosis.diagnose import Diagnosis, DiagnosisSettings, RankedCandidate, diagnose
+from analysis.diagnosis.diagnose import diagnose
+from analysis.diagnosis.linear_screen import LinearFit, linear_screen
 from analysis.diagnosis.refit import Refit, refit
+from analysis.diagnosis.result import Diagnosis, DiagnosisSettings, RankedCandidate
 from analysis.diagnosis.screen import Screen, ScreenFit
 from analysis.diagnosis.signatures import Evidence, Finding, find_signatures
 
@@ -54,6 +65,7 @@ __all__ = [
     "Evidence",
     "Finding",
     "Law",
+    "LinearFit",
     "Location",
     "RankedCandidate",
     "Refit",
@@ -64,5 +76,6 @@ __all__ = [
     "default_candidates",
     "diagnose",
     "find_signatures",
+    "linear_screen",
     "refit",
 ]

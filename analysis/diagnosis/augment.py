@@ -8,10 +8,13 @@ The candidate is written into a copy of the model (new parameters, a new element
 joint released into a spring); the original is kept. Then everything is recalibrated the
 paper's way: a linear effect first with the model's linear parameters on the linear
 (random-excitation) test when one is given (damping equalization,
-:func:`analysis.calibration.linear.calibrate_linear`), then the new nonlinear parameters with
-the model's own (the contact's) on the stepped-sine levels kept for calibration, from the
-screen's estimate and Latin hypercube starts, by Levenberg-Marquardt on the measured branch.
-The error history (every accepted iteration) and the residual maps before and after are kept.
+:func:`analysis.calibration.linear.calibrate_linear`), then the new parameters with the
+model's own (the contact's, and the modal damping of the band's modes for a law that acts at
+rest or a released joint) on the stepped-sine levels kept for calibration, by
+Levenberg-Marquardt on the measured branch from the given values (a diagnosis' recalibrated
+ones, or the screen's estimate) and, on request, Latin hypercube starts. Steps the rig did not
+converge at under force control are left out. The error history (the model's, then every
+accepted iteration) and the residual maps before and after are kept.
 """
 
 from __future__ import annotations
@@ -128,6 +131,10 @@ class AugmentResult:
         }
 
 
+def _predictor(model, data, n_harmonics, n_time) -> BranchMatchedPredictor:
+    return BranchMatchedPredictor(model, data, n_harmonics=n_harmonics, n_time=n_time)
+
+
 def _calibration_levels(data: SteppedSineData, validation_level_n: float | None):
     levels = sorted(float(x) for x in data.levels_n)
     if validation_level_n is None:
@@ -144,11 +151,13 @@ def augment(
     known: Mapping[str, float] | None = None,
     linear_run: str | Path | None = None,
     validation_level_n: float | None = None,
-    n_starts: int = 8,
+    n_starts: int = 0,
     max_iterations: int = 30,
     seed: int = 0,
     out: str | Path | None = None,
     progress: Callable[[str, dict], None] | None = None,
+    n_harmonics: int = 9,
+    n_time: int = 128,
 ) -> AugmentResult:
     """Add ``candidate`` to ``model`` and recalibrate everything.
 
@@ -167,12 +176,14 @@ def augment(
     validation_level_n : float, optional
         Level kept out of the fit (default: the highest of three or more; 0 keeps none).
     n_starts : int
-        Latin hypercube starts besides the screen's estimate.
+        Latin hypercube starts besides the given (or the screen's) values.
     max_iterations : int
     seed : int
     out : path, optional
         Write the augmented model there (a new file).
     progress : callable, optional
+    n_harmonics, n_time : int
+        Balance settings.
 
     Returns
     -------
@@ -180,9 +191,11 @@ def augment(
     """
     t0 = time.perf_counter()
     say = progress or (lambda stage, info: None)
-    before = compare(model, data, predictor=BranchMatchedPredictor(model, data))
+    before = compare(model, data, predictor=_predictor(model, data, n_harmonics, n_time))
     if values is None:
-        fit = Screen(model, data).fit(candidate)
+        fit = Screen(model, data, predictor=_predictor(model, data, n_harmonics, n_time)).fit(
+            candidate
+        )
         values, known = dict(fit.values), dict(fit.known) if known is None else known
         say("screen", {"values": values, "known": known})
     m2, new = candidate.apply(model, dict(values))
@@ -194,7 +207,12 @@ def augment(
             p = m2.parameters[n]
             start[n] = float(np.clip(v, p.lower, p.upper))
     m2 = m2.with_values(start)
-    history: list[dict] = []
+    base_rows = np.asarray(data.control_converged, bool) & np.isin(
+        np.arange(data.n_steps), level_rows(data, _calibration_levels(data, validation_level_n))
+    )
+    z = np.abs(before.residual[base_rows]) ** 2
+    history: list[dict] = [{"stage": "model", "iteration": 0,
+                            "chi2_per_dof": float(np.nanmean(z)), "parameters": {}}]  # fmt: skip
     linear_info = None
     linear_params = m2.parameter_names(group="linear", calibrate=True)
     if candidate.is_linear and linear_run is not None:
@@ -216,6 +234,7 @@ def augment(
     ]))  # fmt: skip
     levels = _calibration_levels(data, validation_level_n)
     rows = level_rows(data, levels)
+    rows = rows[np.asarray(data.control_converged, bool)[rows]]
 
     def report(stage, info):
         if stage == "lm":
@@ -227,10 +246,10 @@ def augment(
         | {n: Distribution("loguniform", 0.002, 0.05) for n in names if n.startswith("zeta_")},
         n_random_starts=n_starts,
         n_lm_starts=2 if n_starts else 1, seed=seed, max_iterations=max_iterations,
-        progress=report,
+        progress=report, n_harmonics=n_harmonics, n_time=n_time,
     )  # fmt: skip
     history += [{"stage": "lm", **h} for h in r.history]
-    after = compare(r.model, data, predictor=BranchMatchedPredictor(r.model, data))
+    after = compare(r.model, data, predictor=_predictor(r.model, data, n_harmonics, n_time))
     params = {**(linear_info["parameters"] if linear_info else {}), **r.parameters}
     result = AugmentResult(candidate, r.model, before, after, params, history, levels,
                            linear_info, seconds=time.perf_counter() - t0)  # fmt: skip

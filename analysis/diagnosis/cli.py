@@ -21,7 +21,8 @@ from analysis.diagnosis.augment import augment
 from analysis.diagnosis.branches import BranchMatchedPredictor
 from analysis.diagnosis.candidates import default_candidates
 from analysis.diagnosis.compare import compare
-from analysis.diagnosis.diagnose import DiagnosisSettings, diagnose
+from analysis.diagnosis.diagnose import diagnose
+from analysis.diagnosis.result import DiagnosisSettings
 from analysis.measurement_file import SteppedSineData, read_measurement
 from analysis.model import load_model
 
@@ -69,7 +70,8 @@ def _model(args):
 def cmd_compare(args) -> dict:
     """Residual blocks of a model against a file; figures with ``--figures``."""
     model, data = _model(args), _stepped(args.run)
-    cmp = compare(model, data, predictor=BranchMatchedPredictor(model, data))
+    pred = BranchMatchedPredictor(model, data, n_harmonics=args.harmonics, n_time=args.samples)
+    cmp = compare(model, data, predictor=pred)
     if args.figures:
         from analysis.report.diagnosis_figures import (
             plot_frequency_level_map,
@@ -87,11 +89,15 @@ def cmd_compare(args) -> dict:
     return cmp.to_json()
 
 
+def _settings(args) -> DiagnosisSettings:
+    return DiagnosisSettings(workers=args.workers, n_starts=args.starts,
+                             n_harmonics=args.harmonics, n_time=args.samples)  # fmt: skip
+
+
 def cmd_diagnose(args) -> dict:
     """Which effect is missing."""
     model, data = _model(args), _stepped(args.run)
-    st = DiagnosisSettings(n_verify=args.verify, workers=args.workers, n_starts=args.starts)
-    result = diagnose(model, data, linear_run=args.linear_run, settings=st,
+    result = diagnose(model, data, linear_run=args.linear_run, settings=_settings(args),
                       progress=_progress(args.json))  # fmt: skip
     if args.figures:
         from analysis.report.diagnosis_figures import plot_diagnosis
@@ -115,8 +121,8 @@ def cmd_augment(args) -> dict:
             raise ValueError(f"no candidate {args.candidate!r} (e.g. {labels}; ...)")
         cand = matches[0]
     else:
-        st = DiagnosisSettings(workers=args.workers)
-        diag = diagnose(model, data, linear_run=args.linear_run, settings=st, progress=show)
+        diag = diagnose(model, data, linear_run=args.linear_run, settings=_settings(args),
+                        progress=show)  # fmt: skip
         if diag.verdict != "explained":
             raise RuntimeError(
                 f"the diagnosis claims nothing to add (verdict: {diag.verdict}); name a "
@@ -124,18 +130,18 @@ def cmd_augment(args) -> dict:
             )
         best = diag.group[0]
         cand = best.candidate
-        screen = best.screen
-        values, known = dict(screen.values), dict(screen.known)
+        values, known = best.start_values()
         show("chosen", {"candidate": cand.label})
     result = augment(model, data, cand, values=values, known=known, linear_run=args.linear_run,
-                     n_starts=args.starts, out=args.out, progress=show)  # fmt: skip
+                     n_starts=args.starts, out=args.out, progress=show,
+                     n_harmonics=args.harmonics, n_time=args.samples)  # fmt: skip
     if args.figures:
         from analysis.report.diagnosis_figures import plot_before_after, plot_error_history
 
         out = Path(args.figures)
         out.mkdir(parents=True, exist_ok=True)
         plot_before_after(result.before, result.after, out / "before_after.png",
-                          title=cand.label)  # fmt: skip
+                          title=f"added: {cand.label}")  # fmt: skip
         plot_error_history(result.history, out / "error_history.png", title=cand.label)
     if not args.json:
         print(result.summary())
@@ -151,6 +157,8 @@ def add_parsers(subparsers) -> None:
         sp.add_argument("--set", action="append", metavar="NAME=VALUE", help="override a value")
         sp.add_argument("--figures", metavar="DIR", help="write the figures into DIR")
         sp.add_argument("--json", action="store_true", help="print one JSON object")
+        sp.add_argument("--harmonics", type=int, default=9, help="harmonics of the balance")
+        sp.add_argument("--samples", type=int, default=128, help="AFT samples per period")
 
     sp = subparsers.add_parser("compare", help="residual maps of a model against a file")
     common(sp)
@@ -160,8 +168,7 @@ def add_parsers(subparsers) -> None:
     sp = subparsers.add_parser("diagnose", help="which physical effect the model misses")
     common(sp)
     sp.add_argument("--linear-run", help="random-excitation test (for linear candidates)")
-    sp.add_argument("--verify", type=int, default=2, help="distinct laws verified in full")
-    sp.add_argument("--starts", type=int, default=6, help="extra starts for strong effects")
+    sp.add_argument("--starts", type=int, default=4, help="extra starts for strong effects")
     sp.add_argument("--workers", type=int, default=2, help="processes for verifications")
     sp.set_defaults(func=cmd_diagnose)
 
@@ -170,7 +177,7 @@ def add_parsers(subparsers) -> None:
     sp.add_argument("--out", required=True, help="the new model file (the old one is kept)")
     sp.add_argument("--candidate", help="candidate label (default: the diagnosis' best)")
     sp.add_argument("--linear-run", help="random-excitation test (for a linear effect)")
-    sp.add_argument("--starts", type=int, default=8, help="Latin hypercube starts")
+    sp.add_argument("--starts", type=int, default=0, help="further Latin hypercube starts")
     sp.add_argument("--workers", type=int, default=2, help="processes for verifications")
     sp.set_defaults(func=cmd_augment)
 

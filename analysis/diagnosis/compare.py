@@ -13,11 +13,12 @@ while a passing one bounds it.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats
 
+from analysis.diagnosis.branches import BranchMatchedPredictor
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 from analysis.predict import SteppedSinePredictor
@@ -71,6 +72,7 @@ class Comparison:
     measured: np.ndarray
     predicted: np.ndarray
     alpha: float
+    left_out: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
 
     @property
     def chi2_per_dof(self) -> float:
@@ -105,7 +107,9 @@ class Comparison:
         lines = [
             f"chi2/dof {self.chi2_per_dof:.3g} (rms residual / noise "
             f"{self.rms_over_noise:.3g}) over {np.isfinite(self.residual).sum()} FRF values"
-        ]
+            + (f" ({self.left_out.size} step(s) not converged under force control left out)"
+               if self.left_out.size else "")
+        ]  # fmt: skip
         fails = self.failing()
         if not fails:
             lines.append("every block is consistent with the noise: the model is adequate here")
@@ -120,6 +124,7 @@ class Comparison:
             "rms_over_noise": self.rms_over_noise,
             "adequate": self.adequate,
             "alpha": self.alpha,
+            "left_out_steps": self.left_out.tolist(),
             "blocks": [{**b.__dict__, "verdict": b.verdict} for b in self.blocks],
         }
 
@@ -139,6 +144,8 @@ def compare(
     bands_hz: Sequence[tuple[float, float]] | None = None,
     alpha: float = 0.01,
     predictor: SteppedSinePredictor | None = None,
+    include_unconverged: bool = False,
+    sigma: str = "file",
 ) -> Comparison:
     """Normalised residuals and block verdicts of ``model`` against ``data``.
 
@@ -152,17 +159,38 @@ def compare(
         Frequency bands of the blocks (default: three with equal numbers of steps).
     alpha : float
         Family-wise significance of the "fails here" verdicts (Bonferroni over the blocks).
+    predictor : SteppedSinePredictor, optional
+        Default: a :class:`~analysis.diagnosis.branches.BranchMatchedPredictor`, whose
+        standard errors carry the force's error through the model.
+    sigma : {"file", "model"}
+        ``"file"``: the FRFs' standard errors from the file's phasor uncertainties to first
+        order, ``|H| sqrt((s_R/|R|)^2 + (s_F/|F|)^2)``; ``"model"``: the force's error carried
+        through the model's tangent
+        (:meth:`~analysis.diagnosis.branches.BranchMatchedPredictor.response_sigma`).
+    include_unconverged : bool
+        Also score the steps the file flags as not converged under force control (by default
+        they are left out: their residuals are NaN and :attr:`Comparison.left_out` lists them).
     """
-    pred = predictor or SteppedSinePredictor(model, data, channels=channels)
+    pred = predictor or BranchMatchedPredictor(model, data, channels=channels)
     H, s = pred.measured()
-    p = pred.predict()
     positive = s[np.isfinite(s) & (s > 0)]
     floor = positive.min() if positive.size else 1.0
+    if isinstance(pred, BranchMatchedPredictor) and sigma == "model":
+        # the force's error propagated through the model (see response_sigma)
+        p, s = pred.predict_with_sigma()
+    else:
+        p = pred.predict()
     sig = np.maximum(np.nan_to_num(s, nan=floor), floor)
     r = (p.frf - H) / sig
+    left_out = np.zeros(data.n_steps, bool)
+    if not include_unconverged:
+        # a step whose force control did not converge is not the planned excitation, and at
+        # the fold of a resonance its response is still drifting while it is measured
+        left_out = ~np.asarray(data.control_converged, bool)
+        r[left_out] = np.nan
     lv = data.levels_n[data.level_index]
     bands = list(bands_hz) if bands_hz is not None else default_bands(data.frequency_hz)
-    orders = [str(o) for o in data.orders]
+    orders = [str(o) for o in getattr(pred, "compared_orders", data.orders)]
     blocks = []
     for c, ch in enumerate(pred.channel_names):
         for k, o in enumerate(orders):
@@ -182,5 +210,15 @@ def compare(
     per_block = alpha / max(len(blocks), 1)
     blocks = [Block(**{**b.__dict__, "consistent": b.p_value >= per_block}) for b in blocks]
     return Comparison(
-        r, data.frequency_hz, lv, pred.channel_names, orders, bands, blocks, H, p.frf, alpha
+        r,
+        data.frequency_hz,
+        lv,
+        pred.channel_names,
+        orders,
+        bands,
+        blocks,
+        H,
+        p.frf,
+        alpha,
+        np.flatnonzero(left_out),
     )

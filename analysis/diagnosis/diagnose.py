@@ -1,253 +1,65 @@
 """Which physical effect is missing? Compare, read the evidence, screen, verify, rank.
 
->>> result = diagnose(model, data)              # doctest: +SKIP
->>> print(result.summary())                      # doctest: +SKIP
+>>> result = diagnose(model, data, linear_run="linear.h5")      # doctest: +SKIP
+>>> print(result.summary())                                       # doctest: +SKIP
 
 1. **Compare** the calibrated model with the file on the measured branch
-   (:func:`~analysis.diagnosis.compare.compare` with a
-   :class:`~analysis.diagnosis.branches.BranchMatchedPredictor`). A model within
-   ``adequate_rms`` of the noise is adequate: nothing is claimed.
+   (:func:`~analysis.diagnosis.compare.compare`). A model within ``adequate_rms`` of the noise
+   is adequate: nothing is claimed.
 2. **Evidence**: the signature tests (:mod:`analysis.diagnosis.signatures`), in words.
-3. **Screen** every candidate (each law of the element library at each plausible location,
-   linear changes) by the harmonic-domain force estimate (:mod:`analysis.diagnosis.screen`),
-   ranked by BIC.
-4. **Verify** the best distinct candidates, plus the best of each law family the evidence
-   points at, in the full model (:mod:`analysis.diagnosis.verify`): everything recalibrated.
-5. **Rank** the verified candidates by BIC on the same steps; candidates within ``tie_bic``
-   of the best form a group (the simplest law first). The effect is *explained* when the best
-   brings the residual to ``explained_rms`` of the noise; otherwise nothing in the library
-   explains it and the tool says so. For a group, the measurement that would separate its
-   members is computed (:mod:`analysis.diagnosis.discriminate`).
+3. In parallel: the model's **own parameters recalibrated** on the stepped sine (the baseline
+   every candidate must beat; if it reaches the noise the model was only mis-calibrated and
+   nothing is claimed), each **linear candidate** (mass, spring, compliant joint) on the
+   linear test with the linear parameters recalibrated
+   (:mod:`analysis.diagnosis.linear_screen`), and the **screen** of every law of the element
+   library at every plausible location by the harmonic-domain force estimate
+   (:mod:`analysis.diagnosis.screen`), ranked by BIC.
+4. **Verify** a short list in the full model (:mod:`analysis.diagnosis.verify`): the best
+   distinct laws of the screen (the best one also at its second location: neighbours tie in
+   a screen) and the linear candidates that earn their parameter on the linear test; each
+   recalibrated by Levenberg-Marquardt from the screen's (or the linear test's) values. Only
+   if none reaches the noise: the next laws, the best of each law family the evidence points
+   at, and further starts for the best two.
+5. **Rank** the verified candidates by BIC on the same steps against the recalibrated model;
+   candidates within ``tie_bic`` of the best form a group (the simplest law first). The effect
+   is *explained* when the best brings the residual to ``explained_rms`` of the noise;
+   otherwise nothing in the library explains it and the tool says so. For a group, the
+   measurement that would separate its members is computed
+   (:mod:`analysis.diagnosis.discriminate`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from analysis.diagnosis.branches import BranchMatchedPredictor
 from analysis.diagnosis.candidates import Candidate, default_candidates
-from analysis.diagnosis.compare import Comparison, compare
-from analysis.diagnosis.screen import Screen, ScreenFit, information_criteria
+from analysis.diagnosis.compare import compare
+from analysis.diagnosis.linear_screen import LinearFit, LinearJob, run_linear_job
+from analysis.diagnosis.result import Diagnosis, DiagnosisSettings, RankedCandidate
+from analysis.diagnosis.screen import (
+    Screen,
+    ScreenFit,
+    ScreenJob,
+    information_criteria,
+    screen_pass,
+)
 from analysis.diagnosis.signatures import FAMILIES, Evidence, find_signatures
 from analysis.diagnosis.verify import Verified, VerifyJob, run_verify
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
-from analysis.planning.executors import open_executor, run_jobs
+from analysis.planning.executors import open_executor
 
 __all__ = ["Diagnosis", "DiagnosisSettings", "RankedCandidate", "diagnose"]
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class DiagnosisSettings:
-    """Settings of :func:`diagnose`.
-
-    Parameters
-    ----------
-    adequate_rms : float
-        A model whose residual (root of chi-square per degree of freedom) is at most this is
-        adequate and nothing is claimed.
-    explained_rms : float
-        A verified candidate explains the misfit when it brings the residual to at most this.
-    tie_bic : float
-        Candidates within this BIC of the best are reported as a group.
-    n_verify : int
-        Best distinct screened candidates verified in the full model.
-    n_refine : int
-        Best screened candidates refined by the screen's alternations.
-    verify_iterations : int
-        LM iterations per verification.
-    n_starts : int
-        Further Latin hypercube starts of a verification that does not reach the noise.
-    workers : int
-        Processes for the verifications (1: in this process).
-    """
-
-    adequate_rms: float = 1.5
-    explained_rms: float = 1.5
-    tie_bic: float = 10.0
-    n_verify: int = 2
-    n_refine: int = 12
-    verify_iterations: int = 10
-    n_starts: int = 6
-    workers: int = 2
-
-    def __post_init__(self) -> None:
-        if self.adequate_rms <= 0 or self.explained_rms <= 0 or self.tie_bic < 0:
-            raise ValueError("DiagnosisSettings: thresholds must be positive")
-        if self.n_verify < 1 or self.workers < 1:
-            raise ValueError("DiagnosisSettings: n_verify and workers must be >= 1")
-
-
-@dataclass
-class RankedCandidate:
-    """A verified candidate in the final ranking.
-
-    Attributes
-    ----------
-    rank : int
-        1 = best.
-    group : int
-        Candidates with the same group number tie (within ``tie_bic``).
-    delta_bic : float
-        BIC minus the model's (negative: better).
-    """
-
-    rank: int
-    group: int
-    candidate: Candidate
-    bic: float
-    delta_bic: float
-    rms_over_noise: float
-    verified: Verified
-    screen: ScreenFit | None
-
-    def to_json(self) -> dict:
-        return {
-            "rank": self.rank,
-            "group": self.group,
-            "label": self.candidate.label,
-            "kind": self.candidate.law.kind,
-            "location": self.candidate.location.name,
-            "linear": self.candidate.is_linear,
-            "n_params": self.candidate.n_params,
-            "bic": self.bic,
-            "delta_bic": self.delta_bic,
-            "rms_over_noise": self.rms_over_noise,
-            "parameters": self.verified.parameters,
-            "seconds": self.verified.seconds,
-        }
-
-
-@dataclass
-class Diagnosis:
-    """Result of :func:`diagnose`.
-
-    Attributes
-    ----------
-    verdict : {"adequate", "explained", "unexplained"}
-    comparison : Comparison
-        The model against the file (before any change).
-    evidence : Evidence
-    screen : list of ScreenFit
-        Every screened candidate, best first; ``baseline`` the model's own fit.
-    ranking : list of RankedCandidate
-        Verified candidates, best first.
-    group : list of RankedCandidate
-        The best and those tied with it.
-    recommendation : dict or None
-        For a group: the measurement that separates its members best.
-    timings : dict of str to float, s
-    """
-
-    verdict: str
-    comparison: Comparison
-    evidence: Evidence
-    screen: list[ScreenFit] = field(default_factory=list)
-    baseline: ScreenFit | None = None
-    ranking: list[RankedCandidate] = field(default_factory=list)
-    model_bic: float = math.nan
-    recommendation: dict | None = None
-    timings: dict[str, float] = field(default_factory=dict)
-    settings: DiagnosisSettings = field(default_factory=DiagnosisSettings)
-
-    @property
-    def group(self) -> list[RankedCandidate]:
-        return [r for r in self.ranking if r.group == 1] if self.ranking else []
-
-    @property
-    def best(self) -> RankedCandidate | None:
-        return self.ranking[0] if self.ranking and self.verdict == "explained" else None
-
-    def rank_of(self, kind: str, location: str, side: int | None = None) -> int | None:
-        """Rank (1 = best) of a law at a location among the verified candidates, with ties:
-        a candidate in the best group counts as first; None if not verified."""
-        for r in self.ranking:
-            c = r.candidate
-            if (
-                c.law.kind == kind
-                and c.location.name == location
-                and (side is None or c.law.options.get("side") == side)
-            ):
-                return 1 if r.group == 1 else r.rank
-        return None
-
-    def summary(self, n: int = 8) -> str:
-        cmp = self.comparison
-        lines = [
-            f"model against the file: residual {cmp.rms_over_noise:.3g} x noise "
-            f"(chi2/dof {cmp.chi2_per_dof:.3g})",
-            self.evidence.summary(),
-        ]
-        if self.verdict == "adequate":
-            lines.append(
-                "verdict: the model is adequate (residual at the noise); nothing is claimed"
-            )
-            return "\n".join(lines)
-        if self.baseline is not None and self.screen:
-            lines.append(f"screen ({len(self.screen)} candidates; delta BIC against the model):")
-            for f in self.screen[:n]:
-                lines.append(
-                    f"  {f.bic - self.baseline.bic:10.1f}  {f.candidate.label}  "
-                    + ", ".join(f"{k} {v:.4g}" for k, v in f.values.items())
-                )
-        lines.append("verified in the full model (everything recalibrated):")
-        for r in self.ranking:
-            lines.append(
-                f"  #{r.rank} (group {r.group}) {r.candidate.label}: residual "
-                f"{r.rms_over_noise:.3g} x noise, delta BIC {r.delta_bic:.1f}, "
-                + ", ".join(f"{k} {v:.4g}" for k, v in r.verified.parameters.items())
-            )
-        if self.verdict == "explained":
-            g = self.group
-            kind = "a linear effect" if g[0].candidate.is_linear else "a nonlinear effect"
-            if len(g) == 1:
-                lines.append(f"verdict: explained by {g[0].candidate.label} ({kind})")
-            else:
-                lines.append(
-                    f"verdict: explained ({kind}); tied within {self.settings.tie_bic:g} BIC: "
-                    + "; ".join(r.candidate.label for r in g)
-                    + f" (the simplest first: {g[0].candidate.label})"
-                )
-        else:
-            best = self.ranking[0] if self.ranking else None
-            lines.append(
-                "verdict: nothing in the element library explains the misfit"
-                + (f"; the best, {best.candidate.label}, leaves {best.rms_over_noise:.3g} x "
-                   "noise" if best else "")
-            )  # fmt: skip
-        if self.recommendation:
-            lines.append("to separate the tied candidates: " + self.recommendation["text"])
-        return "\n".join(lines)
-
-    def to_json(self) -> dict:
-        base = self.baseline.bic if self.baseline is not None else 0.0
-        return {
-            "verdict": self.verdict,
-            "comparison": {
-                "chi2_per_dof": self.comparison.chi2_per_dof,
-                "rms_over_noise": self.comparison.rms_over_noise,
-                "adequate": self.comparison.adequate,
-            },
-            "evidence": self.evidence.to_json(),
-            "screen": [
-                {"label": f.candidate.label, "delta_bic": f.bic - base, "chi2_per_dof":
-                 f.chi2_per_dof, "values": f.values, "known": f.known}
-                for f in self.screen[:30]
-            ],
-            "ranking": [r.to_json() for r in self.ranking],
-            "group": [r.candidate.label for r in self.group],
-            "recommendation": self.recommendation,
-            "timings": self.timings,
-        }  # fmt: skip
 
 
 def _linear_steps(pred: BranchMatchedPredictor) -> np.ndarray:
@@ -260,42 +72,21 @@ def _linear_steps(pred: BranchMatchedPredictor) -> np.ndarray:
     return out
 
 
-def _shortlist(fits: list[ScreenFit], evidence: Evidence, n_verify: int):
-    """Candidates to verify, in two stages.
+class _Later:
+    """A job's result: from an executor's future, or computed in this process on demand."""
 
-    First: the best screened candidate, the next location of the same law (neighbouring
-    locations tie in a screen) and the best of the next ``n_verify - 1`` distinct laws.
-    Then, only if none of those explains the misfit: the next locations and laws, and the best
-    candidate of each law family the evidence points at (among the best 30).
-    """
-    first: list[ScreenFit] = []
-    laws: list = []
-    for f in fits:
-        if f.candidate.law not in laws:
-            laws.append(f.candidate.law)
-            first.append(f)
-            if len(laws) >= n_verify:
-                break
-    second: list[ScreenFit] = []
-    if fits:
-        same = [f for f in fits[1:] if f.candidate.law == fits[0].candidate.law]
-        first[1:1] = same[:1]
-        second += same[1:2]
-    for f in fits:
-        if f.candidate.law not in laws:
-            laws.append(f.candidate.law)
-            second.append(f)
-            break
-    # the evidence's law families: the best of each at a point, at a group and at a joint
-    # (a screen reads the states of a structural location less well than a measured point's)
-    for fam in evidence.families:
-        kinds = FAMILIES.get(fam, ())
-        for where in ("point", "group", "joint"):
-            best = next((f for f in fits if f.candidate.law.kind in kinds
-                         and _location_class(f.candidate) == where), None)  # fmt: skip
-            if best is not None and best not in first and best not in second:
-                second.append(best)
-    return first, second[:6]
+    def __init__(self, executor, fn, job) -> None:
+        self._future = executor.submit(fn, job) if executor is not None else None
+        self._fn, self._job = fn, job
+
+    def result(self):
+        if self._future is not None:
+            return self._future.result()
+        return self._fn(self._job)
+
+
+def _law_key(c: Candidate) -> tuple:
+    return (c.law.kind, c.law.options.get("side"))
 
 
 def _location_class(c: Candidate) -> str:
@@ -304,6 +95,97 @@ def _location_class(c: Candidate) -> str:
     if c.location.point is not None:
         return "point"
     return "group" if c.location.incidences else "structure"
+
+
+_LINEAR_KINDS = ("mass", "linear_spring", "joint_spring", "parameter")
+
+
+def _shortlist(
+    screen: Screen,
+    fits: list[ScreenFit],
+    evidence: Evidence,
+    n_verify: int,
+    baseline_bic: float,
+    class_share: float = 0.25,
+):
+    """Screened candidates to verify, in two stages.
+
+    First: the best ``n_verify`` distinct laws, the best also at its second location
+    (neighbouring points tie in a screen); and at each location class of unmeasured DOFs (a
+    group of springs such as the mounts, a joint), where a screen reads the states less well
+    than at a measured point and cannot tell look-alike laws apart, once refined by the
+    screen's alternations: the best of its two leading candidates, the best law's candidate
+    there, and the best candidate of a law family the evidence points at, each if it gains
+    at least ``class_share`` of the best candidate's BIC gain. Then, only if none of those
+    explains the misfit: the next two laws, and the best candidate of each law family the
+    evidence points at a measured point.
+    """
+    nonlinear = [f for f in fits if f.candidate.law.kind not in _LINEAR_KINDS]
+    first: list[ScreenFit] = []
+    laws: list = []
+    for f in nonlinear:
+        if _law_key(f.candidate) not in laws:
+            laws.append(_law_key(f.candidate))
+            first.append(f)
+            if len(laws) >= n_verify:
+                break
+    if first:
+        lead = first[0].candidate
+        same = [f for f in nonlinear if f.candidate.law == lead.law
+                and f.candidate.location != lead.location]  # fmt: skip
+        first[1:1] = same[:1]
+    kinds = [k for fam in evidence.families for k in FAMILIES.get(fam, ())]
+    lead = first[0].candidate.law if first else None
+
+    def screen_gain(f) -> float:
+        return -np.inf if f is None else baseline_bic - f.bic
+
+    best_gain = max((screen_gain(f) for f in nonlinear[:1]), default=np.inf)
+    for where in ("group", "joint"):
+        here = [f for f in nonlinear if _location_class(f.candidate) == where]
+        same = next((f for f in here if f.candidate.law == lead), None)
+        family = next((f for f in here if f.candidate.law.kind in kinds), None)
+        refined: list[ScreenFit] = []
+        for f in [*here[:2], same, family]:
+            if f is not None and all(f.candidate != g.candidate for g in refined):
+                refined.append(screen.refined(f))
+        by_bic = sorted(refined, key=lambda f: f.bic)
+        picks = by_bic[:1] + [
+            next((f for f in refined if f.candidate.law == lead), None),
+            next((f for f in by_bic if f.candidate.law.kind in kinds), None),
+        ]
+        for f in picks:
+            # only where the class explains a fair share of what the best candidate does
+            gain = screen_gain(f)
+            if (f is not None and gain >= class_share * best_gain
+                    and all(f.candidate != g.candidate for g in first)):  # fmt: skip
+                first.append(f)
+    second: list[ScreenFit] = []
+    for f in nonlinear:
+        if len(second) >= 2:
+            break
+        if _law_key(f.candidate) not in laws:
+            laws.append(_law_key(f.candidate))
+            second.append(f)
+    for fam in evidence.families:
+        fam_kinds = FAMILIES.get(fam, ())
+        best = next((f for f in nonlinear if f.candidate.law.kind in fam_kinds
+                     and _location_class(f.candidate) == "point"), None)  # fmt: skip
+        if best is not None and all(best.candidate != g.candidate for g in first + second):
+            second.append(best)
+    return first, second[:4]
+
+
+def _linear_shortlist(base: LinearFit | None, fits: list[LinearFit], st: DiagnosisSettings):
+    """Linear candidates that earn their parameter on the linear test and remove most of its
+    misfit (the best, and those tied with it)."""
+    if base is None or base.failed:
+        return []
+    good = [f for f in fits if not f.failed and f.delta_bic < -st.linear_bic
+            and f.cost <= st.linear_ratio * base.cost]  # fmt: skip
+    if not good:
+        return []
+    return [f for f in good if f.bic - good[0].bic <= st.tie_bic][:2]
 
 
 def diagnose(
@@ -324,7 +206,8 @@ def diagnose(
     data : SteppedSineData
         A stepped-sine file (read from disk: verifications re-read it by path).
     linear_run : path, optional
-        The random-excitation test of the same rig, used to recalibrate linear candidates.
+        The random-excitation test of the same rig: linear candidates are screened and
+        recalibrated there.
     candidates : list of Candidate, optional
         Default: :func:`~analysis.diagnosis.candidates.default_candidates`.
     settings : DiagnosisSettings, optional
@@ -339,31 +222,130 @@ def diagnose(
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     say = progress or (lambda stage, info: None)
-    pred = BranchMatchedPredictor(model, data)
+    pred = BranchMatchedPredictor(model, data, n_harmonics=st.n_harmonics, n_time=st.n_time)
     cmp = compare(model, data, predictor=pred)
-    H, s = pred.measured()
+    _, s = pred.measured()
     evidence = find_signatures(cmp, data, s, _linear_steps(pred))
     timings["compare_s"] = time.perf_counter() - t0
     say("compare", {"rms_over_noise": cmp.rms_over_noise, "seconds": timings["compare_s"]})
     if cmp.rms_over_noise <= st.adequate_rms:
         timings["total_s"] = time.perf_counter() - t0
         return Diagnosis("adequate", cmp, evidence, timings=timings, settings=st)
-    t1 = time.perf_counter()
-    screen = Screen(model, data, predictor=pred)
     cands = default_candidates(model) if candidates is None else list(candidates)
-    baseline = screen.baseline()
-    fits = screen.run(cands, n_refine=st.n_refine, progress=progress)
-    timings["screen_s"] = time.perf_counter() - t1
-    say("screened", {"n": len(fits), "seconds": timings["screen_s"]})
-    t2 = time.perf_counter()
-    first, second = _shortlist(fits, evidence, st.n_verify)
-    ranking, model_bic = _verify(model, data, first, second, cmp, linear_run, st, say)
+    text, source, path = model.to_toml(), str(model.source), str(data.path)
+
+    def verify_job(cand, values=None, known=None, start_toml=None, n_starts=0, seed=0):
+        return VerifyJob(
+            text, source, path, None, cand, dict(values or {}), dict(known or {}),
+            None if linear_run is None else str(linear_run), st.verify_iterations, n_starts,
+            seed, start_toml, st.n_harmonics, st.n_time, st.verify_seconds,
+        )  # fmt: skip
+
+    with open_executor(st.workers) as ex:
+        t1 = time.perf_counter()
+        nonlinear = [c for c in cands if not (linear_run is not None and c.law.kind in (
+            "mass", "linear_spring", "joint_spring"))]  # fmt: skip
+        # the screen's first pass shared with a worker; the recalibration and the linear
+        # test's candidates on the workers meanwhile
+        mine, theirs = (nonlinear[0::2], nonlinear[1::2]) if ex is not None else (nonlinear, [])
+        share = _Later(ex, screen_pass, ScreenJob(text, source, path, tuple(theirs),
+                                                  st.n_harmonics, st.n_time))  # fmt: skip
+        refit_job = _Later(ex, run_verify, verify_job(None))
+        lin_jobs = []
+        if linear_run is not None:
+            lin = [c for c in cands if c.law.kind in ("mass", "linear_spring", "joint_spring")]
+            lin_jobs = [_Later(ex, run_linear_job, LinearJob(text, source, str(linear_run), c))
+                        for c in [None, *lin]]  # fmt: skip
+        screen = Screen(model, data, predictor=pred)
+        baseline = screen.baseline()
+        fits = screen.first_pass(mine, progress) + (share.result() if theirs else [])
+        fits = screen.refine(fits, st.n_refine, progress)
+        timings["screen_s"] = time.perf_counter() - t1
+        say("screened", {"n": len(fits), "seconds": timings["screen_s"]})
+        lin_base, lin_fits = None, []
+        if lin_jobs:
+            done = [j.result() for j in lin_jobs]
+            lin_base, lin_fits = done[0], done[1:]
+            for f in lin_fits:
+                f.delta_bic = f.bic - lin_base.bic
+            lin_fits.sort(key=lambda f: f.bic)
+            say("linear screen", {"n": len(lin_fits), "best": lin_fits[0].candidate.label
+                                  if lin_fits else ""})  # fmt: skip
+        refit = refit_job.result()
+        timings["refit_s"] = refit.seconds
+        say("recalibrated", {"rms_over_noise": refit.rms_over_noise()})
+        result = Diagnosis("adequate", cmp, evidence, fits, baseline, lin_fits, refit,
+                           timings=timings, settings=st)  # fmt: skip
+        if refit.rms_over_noise() <= st.adequate_rms:
+            timings["total_s"] = time.perf_counter() - t0
+            return result
+        t2 = time.perf_counter()
+        first, second = _shortlist(screen, fits, evidence, st.n_verify, baseline.bic)
+        linear_first = _linear_shortlist(lin_base, lin_fits, st)
+        jobs = [verify_job(f.candidate, f.values, f.known) for f in first]
+        jobs += [verify_job(f.candidate, start_toml=f.model_toml) for f in linear_first]
+        origin: list = [*first, *linear_first]
+        pending = [_Later(ex, run_verify, j) for j in jobs]
+        done = [p.result() for p in pending]
+        say("verified", {"n": len(done), "best_rms": min(v.rms_over_noise() for v in done)})
+
+        def left() -> float:
+            return st.time_budget_s - (time.perf_counter() - t0)
+
+        def unexplained() -> bool:
+            return min(v.rms_over_noise() for v in done) > st.explained_rms
+
+        # a strong effect's fit may need longer than the time a verification has: those
+        # stopped for time while still lowering the metric fast go on from where they were
+        if unexplained():
+            going = sorted((i for i, v in enumerate(done) if v.stopped
+                            and v.last_decrease() >= st.continue_decrease),
+                           key=lambda i: done[i].chi2_per_dof())[:2]  # fmt: skip
+            if going:
+                say("continue", {"n": len(going)})
+            cont = [_Later(ex, run_verify, dataclasses.replace(
+                verify_job(origin[i].candidate, start_toml=done[i].model_toml),
+                max_seconds=st.continue_seconds)) for i in going]  # fmt: skip
+            for i, p in zip(going, cont, strict=True):
+                v = p.result()
+                if v.chi2_per_dof() < done[i].chi2_per_dof():
+                    v.seconds += done[i].seconds
+                    v.history = done[i].history + v.history
+                    done[i] = v
+
+        if unexplained() and second and left() > 0:
+            more = [_Later(ex, run_verify, verify_job(f.candidate, f.values, f.known))
+                    for f in second]  # fmt: skip
+            done += [p.result() for p in more]
+            origin += second
+            say("verified", {"n": len(done), "best_rms": min(v.rms_over_noise() for v in done)})
+        order = np.argsort([v.chi2_per_dof() for v in done])
+        best_rms = done[order[0]].rms_over_noise()
+        # further starts only for a candidate that went most of the way (a local minimum of
+        # a strong effect), not for one that explains little
+        promising = best_rms <= st.restart_fraction * refit.rms_over_noise()
+        if st.n_starts > 0 and best_rms > st.explained_rms and promising and left() > 0:
+            again = [int(i) for i in order[:2] if not done[i].failed]
+            say("restart", {"n": len(again)})
+            retry = []
+            for i in again:
+                o = origin[i]
+                if isinstance(o, LinearFit):
+                    job = verify_job(o.candidate, start_toml=o.model_toml, n_starts=st.n_starts)
+                else:
+                    job = verify_job(o.candidate, o.values, o.known, n_starts=st.n_starts)
+                retry.append(_Later(ex, run_verify, job))
+            for i, p in zip(again, retry, strict=True):
+                v = p.result()
+                if v.chi2_per_dof() < done[i].chi2_per_dof():
+                    v.seconds += done[i].seconds
+                    done[i] = v
     timings["verify_s"] = time.perf_counter() - t2
+    ranking, model_bic = _rank(model, refit, origin, done, st)
     verdict = "unexplained"
     if ranking and ranking[0].rms_over_noise <= st.explained_rms and ranking[0].delta_bic < 0:
         verdict = "explained"
-    result = Diagnosis(verdict, cmp, evidence, fits, baseline, ranking, model_bic,
-                       timings=timings, settings=st)  # fmt: skip
+    result.verdict, result.ranking, result.model_bic = verdict, ranking, model_bic
     if verdict == "explained" and len(result.group) > 1:
         from analysis.diagnosis.discriminate import discriminate
 
@@ -377,74 +359,43 @@ def diagnose(
     return result
 
 
-def _verify(model, data, first, second, cmp, linear_run, st, say):
-    """Verify the shortlist (the second stage only when the first explains nothing); rank by
-    BIC on the steps every recalibrated model converged at."""
-
-    def job(f, n_starts=0, seed=0):
-        return VerifyJob(
-            model.to_toml(), model.source, str(data.path), None, f.candidate, dict(f.values),
-            dict(f.known), None if linear_run is None else str(linear_run),
-            st.verify_iterations, n_starts, seed,
-        )  # fmt: skip
-
-    short = list(first)
-    with open_executor(min(st.workers, max(len(first), 1))) as ex:
-        done = run_jobs(run_verify, [job(f) for f in first], ex)
-        say("verified", {"n": len(done), "best_rms": min(v.rms_over_noise() for v in done)})
-        if min(v.rms_over_noise() for v in done) > st.explained_rms and second:
-            done += run_jobs(run_verify, [job(f) for f in second], ex)
-            short += second
-            say("verified", {"n": len(done), "best_rms": min(v.rms_over_noise() for v in done)})
-        # strong effects: more starts for the best two when none reached the noise
-        order = np.argsort([v.chi2_per_dof() for v in done])
-        if st.n_starts > 0 and done[order[0]].rms_over_noise() > st.explained_rms:
-            again = [int(i) for i in order[:2] if not done[i].failed]
-            say("restart", {"n": len(again)})
-            retry = [job(short[i], st.n_starts, 1) for i in again]
-            for i, v in zip(again, run_jobs(run_verify, retry, ex), strict=True):
-                if v.chi2_per_dof() < done[i].chi2_per_dof():
-                    v.seconds += done[i].seconds
-                    done[i] = v
-    z0 = 2 * np.abs(cmp.residual) ** 2
-    base_step = z0.sum(axis=(1, 2))
-    base_step[~np.all(np.isfinite(z0), axis=(1, 2))] = np.nan
-    # a recalibrated model that fails on many steps the model solves is not comparable
+def _rank(model: Model, refit: Verified, origin: list, done: list[Verified], st):
+    """Rank the verified candidates by BIC on the steps every one of them (and the
+    recalibrated model) converged at."""
+    base_step = refit.step_chi2
     n_base = int(np.isfinite(base_step).sum())
-    keep = [
-        (f, v) for f, v in zip(short, done, strict=True)
-        if not v.failed and np.isfinite(v.step_chi2[np.isfinite(base_step)]).sum() >= 0.9 * n_base
-    ]  # fmt: skip
+    # a recalibrated model that fails on many steps the model solves is not comparable
+    keep = [(o, v) for o, v in zip(origin, done, strict=True) if not v.failed
+            and np.isfinite(v.step_chi2[np.isfinite(base_step)]).sum() >= 0.9 * n_base]  # fmt: skip
     common = np.isfinite(base_step)
     for _, v in keep:
         common &= np.isfinite(v.step_chi2)
-    vps = int(2 * z0.shape[1] * z0.shape[2])
-    n = int(common.sum()) * vps
+    n = int(common.sum()) * refit.values_per_step
     if n == 0:
         return [], math.nan
     n_known = len(model.parameter_names(group="nonlinear", calibrate=True))
     model_bic, _ = information_criteria(float(base_step[common].sum()), n, n_known)
     scored = []
-    for f, v in keep:
-        k = n_known + f.candidate.n_params
+    for o, v in keep:
+        k = n_known + o.candidate.n_params
         bic, _ = information_criteria(float(v.step_chi2[common].sum()), n, k)
-        scored.append((bic, f, v))
+        scored.append((bic, o, v))
     if not scored:
         return [], model_bic
     scored.sort(key=lambda t: t[0])
     best = scored[0][0]
-    ranked = []
-    tied = sorted(
-        [t for t in scored if t[0] - best <= st.tie_bic],
-        key=lambda t: (t[1].candidate.n_params, t[0]),
-    )
+    tied = sorted([t for t in scored if t[0] - best <= st.tie_bic],
+                  key=lambda t: (t[1].candidate.n_params, t[0]))  # fmt: skip
     rest = [t for t in scored if t[0] - best > st.tie_bic]
-    for i, (bic, f, v) in enumerate(tied + rest):
+    ranked = []
+    for i, (bic, o, v) in enumerate(tied + rest):
         ranked.append(
             RankedCandidate(
                 rank=i + 1, group=1 if i < len(tied) else i - len(tied) + 2,
-                candidate=f.candidate, bic=bic, delta_bic=bic - model_bic,
-                rms_over_noise=v.rms_over_noise(common), verified=v, screen=f,
+                candidate=o.candidate, bic=bic, delta_bic=bic - model_bic,
+                rms_over_noise=v.rms_over_noise(common), verified=v,
+                screen=o if isinstance(o, ScreenFit) else None,
+                linear=o if isinstance(o, LinearFit) else None,
             )
         )  # fmt: skip
     return ranked, model_bic

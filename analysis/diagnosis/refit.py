@@ -10,6 +10,7 @@ candidate model of a diagnosis (given starts: the screen's estimate and the curr
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -143,6 +144,40 @@ def _objective(model, data, names, rows, n_harmonics, n_time) -> FRFObjective:
     return FRFObjective(pred, space, mask, "uncertainty")
 
 
+def _reweight(obj: FRFObjective, sigma: np.ndarray) -> None:
+    """Weights from the residuals' standard errors at the start model (the force's error
+    through the model, :meth:`BranchMatchedPredictor.response_sigma`), held during the fit."""
+    if obj.weighting != "uncertainty":
+        return
+    positive = sigma[np.isfinite(sigma) & (sigma > 0)]
+    if not positive.size:
+        return
+    obj.sigma = np.maximum(np.nan_to_num(sigma, nan=positive.max()), positive.min())
+    obj._weight = np.sqrt(2) / obj.sigma
+
+
+class _OutOfTime(Exception):
+    """The fit's time is up (raised from the iteration callback)."""
+
+
+def _watch(seen: list, progress, deadline: float | None, h: dict) -> None:
+    seen.append(h)
+    if progress:
+        progress("lm", h)
+    if deadline is not None and time.perf_counter() > deadline and h["iteration"] > 0:
+        raise _OutOfTime
+
+
+def _stopped(obj: FRFObjective, seen: list[dict]) -> LeastSquaresResult:
+    """The result at the last accepted iterate of a fit stopped for time."""
+    x = np.array(seen[-1]["x"])
+    r, J = obj(x, True)
+    JTJ = J.T @ J
+    cov = np.linalg.pinv(JTJ)
+    return LeastSquaresResult(x, 0.5 * float(r @ r), r, J, cov, 0, 0, seen[-1]["iteration"],
+                              False, "stopped: the time allowed is up", list(seen))  # fmt: skip
+
+
 def _current(model: Model, name: str) -> float:
     if name.startswith(ZETA):
         return model.damping.per_mode.get(int(name[len(ZETA) :]), model.damping.default_zeta)
@@ -175,6 +210,7 @@ def refit(
     n_harmonics: int = 9,
     n_time: int = 128,
     progress: Callable[[str, dict], None] | None = None,
+    max_seconds: float | None = None,
 ) -> Refit:
     """Fit ``parameters`` of ``model`` to the stepped-sine FRFs of ``data``.
 
@@ -201,6 +237,9 @@ def refit(
         Balance settings of the predictions.
     progress : callable, optional
         ``progress(stage, info)``: ``"start"`` per start evaluated, ``"lm"`` per iteration.
+    max_seconds : float, optional
+        Stop Levenberg-Marquardt after its first iteration past this time (from the call);
+        the last accepted iterate is returned.
 
     Returns
     -------
@@ -210,13 +249,14 @@ def refit(
     names = tuple(parameters)
     rows = np.arange(data.n_steps) if rows is None else np.asarray(rows)
     obj = _objective(model, data, names, rows, n_harmonics, n_time)
-    base = obj.predictor.predict(rows=rows)
+    base, sigma = obj.predictor.predict_with_sigma(rows=rows)
     good = rows[base.converged[rows]]
     if good.size < rows.size:
         log.info(
             "%d step(s) left out: the start model does not converge there", rows.size - good.size
         )
         obj = _objective(model, data, names, good, n_harmonics, n_time)
+    _reweight(obj, sigma)
     space = obj.space
     p0 = np.array([_current(model, n) for n in names])
     candidates = [p0]
@@ -236,17 +276,18 @@ def refit(
     if not np.isfinite(costs).any():
         raise RuntimeError("no start gives a converged model response on the fitted steps")
     best: LeastSquaresResult | None = None
+    deadline = None if max_seconds is None else time.perf_counter() + max_seconds
     for k in np.argsort(costs)[:n_lm_starts]:
         if not np.isfinite(costs[k]):
             continue
-        res = least_squares_lm(
-            obj,
-            thetas[k],
-            bounds=(lo, hi),
-            max_iterations=max_iterations,
-            ftol=ftol,
-            callback=(lambda h: progress("lm", h)) if progress else None,
-        )
+        seen: list[dict] = []
+        try:
+            res = least_squares_lm(
+                obj, thetas[k], bounds=(lo, hi), max_iterations=max_iterations, ftol=ftol,
+                callback=functools.partial(_watch, seen, progress, deadline),
+            )  # fmt: skip
+        except _OutOfTime:
+            res = _stopped(obj, seen)
         if best is None or res.cost < best.cost:
             best = res
     m, n = best.fun.size, space.size

@@ -20,7 +20,13 @@ step's residual with ``(I - M)^-1``, ``M = W R J R_UL A^+ W^-1`` the derivative 
 with respect to the data through the states: the screen's residual is then, to first order,
 the output-error residual of the model with the law at the measured states, and a law at a
 location the data cannot see explains nothing. The known element's clearance is profiled per
-location and then linearised.
+location and then linearised. A candidate's clearance is searched with its force sampled at
+the AFT points (fast), then fitted with the jump of a contact's damping integrated exactly.
+
+Every recorded order is used, an order the test holds at zero force included: the response
+there is the nonlinear forces' alone. The screen proposes laws and their parameter values;
+at unmeasured DOFs (the mounts, a joint) its ranking is coarse, and the verification in the
+full model decides (:mod:`analysis.diagnosis.diagnose`).
 
 Each fit is scored by BIC (and AICc) on the file's uncertainties; ranks and ties follow.
 
@@ -59,7 +65,14 @@ from analysis.mhb.harmonics import HarmonicBasis
 from analysis.model import Model
 from analysis.system import attachments
 
-__all__ = ["JOINT_ANCHOR", "Screen", "ScreenFit", "information_criteria"]
+__all__ = [
+    "JOINT_ANCHOR",
+    "Screen",
+    "ScreenFit",
+    "ScreenJob",
+    "information_criteria",
+    "screen_pass",
+]
 
 log = logging.getLogger(__name__)
 
@@ -200,6 +213,9 @@ class Screen:
     n_time : int
         Samples per base period of the law evaluations.
     predictor : BranchMatchedPredictor, optional
+    free_parameters : sequence of str
+        Linear model parameters refitted (to first order, through the receptances'
+        derivatives) with every candidate.
     """
 
     def __init__(
@@ -211,22 +227,34 @@ class Screen:
         rcond: float = 1e-8,
         n_time: int = 128,
         predictor: BranchMatchedPredictor | None = None,
+        free_parameters: Sequence[str] = (),
     ) -> None:
         self.model, self.data = model, data
         self.n_iterations, self.rcond, self.n_time = n_iterations, rcond, n_time
+        self.free = tuple(free_parameters)
+        self._sampled = False
         self.predictor = p = predictor or BranchMatchedPredictor(model, data)
         self.n_channels = C = len(p.channel_indices)
-        Hm, s = p.measured()
         d = data
+        # every recorded order (an order held at zero force still shows the response to the
+        # nonlinear forces), as displacement phasors of the sensors
         orders = np.array([float(o) for o in p.orders])
         wk = 2 * np.pi * d.frequency_hz[:, None] * orders[None, :]
         sign = np.array(p._out_sign)[None, :, None]
         power = np.array(p._power)[None, :, None]
         conv = sign / (1j * wk[:, None, :]) ** power
-        self._Y = (Hm * (d.force[:, None, :] * conv)).transpose(0, 2, 1)  # (n, K, C)
-        positive = s[np.isfinite(s) & (s > 0)]
-        sig = np.maximum(np.nan_to_num(s, nan=positive.max()), positive.min())
-        self._sigma = (sig * np.abs(d.force[:, None, :] * conv)).transpose(0, 2, 1)
+        idx = p.channel_indices
+        R, sR = d.response[:, idx, :], d.response_std[:, idx, :]
+        F, sF = d.force[:, None, :], d.force_std[:, None, :]
+        excited = np.zeros(orders.size, bool)
+        excited[p.compared] = True
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # the force's error enters through the response it drives (excited orders)
+            sig = np.sqrt(sR**2 + np.where(excited, np.abs(R) * sF / np.abs(F), 0.0) ** 2)
+        positive = sig[np.isfinite(sig) & (sig > 0)]
+        sig = np.maximum(np.nan_to_num(sig, nan=positive.max()), positive.min())
+        self._Y = (R * conv).transpose(0, 2, 1)  # (n, K, C)
+        self._sigma = (sig * np.abs(conv)).transpose(0, 2, 1)
         self._F = p._force_sign * d.force  # (n, K) on the drive DOF
         self._frames: dict = {}
         self._states: dict = {}
@@ -383,7 +411,7 @@ class Screen:
         return st
 
     def _param_derivative(self, fr: _Frame, name: str) -> np.ndarray:
-        key = ("dR", name)
+        key = ("dR", id(fr), name)
         if key not in self._states:
             lin = self.predictor._linear_model(fr.model)
             asm = fr.model.assemble()
@@ -424,37 +452,48 @@ class Screen:
             bic, aicc = information_criteria(rss, n, k)
             return ScreenFit(cand, rss, n, k, bic, aicc, {cand.parameter: value}, known)
         B = self._incidence(fr, loc)
-        st = self.states(fr, B, (id(fr), loc))
         k = cand.n_params + n_known
+        return self._fit_at(fr, cand, B, self.states(fr, B, (id(fr), loc)), its, nonlinear, k)
+
+    def _fit_at(self, fr, cand, B, st, its, nonlinear, k) -> ScreenFit:
+        loc, law = cand.location, cand.law
         # a location in the force estimate lets the states absorb part of the noise even with
         # no law there: scale by that share, measured on the model's own response plus noise
         syn = self._synthetic()
         absorbed = syn._null(fr, loc, B) / syn._null(fr, None, None)
 
-        def run(nonlinear):
-            return self._fit(fr, st, cand, B, nonlinear, None, its)
+        def run(nonlinear, exact=True):
+            self._sampled = not exact
+            try:
+                return self._fit(fr, st, cand, B, nonlinear, None, its)
+            finally:
+                self._sampled = False
+
+        def search(nonlinear) -> float:
+            return run(nonlinear, exact=False)[0]
 
         if law.nonlinear and nonlinear:
             rss, n, theta, known = run(dict(nonlinear))
         elif law.nonlinear:
+            # the clearance is searched with a jumping force sampled (fast), then fitted exactly
             name = law.nonlinear[0]
             Xi = np.einsum("nkj,lj->nkl", st["U"], B)
             u = np.einsum("tk,nkl->ntl", self._basis.E[:, self._basis.order_k], Xi).real
             side = law.options.get("side")
             amp = float(np.abs(u).max() if side is None else max((side * u).max(), 1e-12))
-            grid = amp * np.array([0.0, 0.15, 0.3, 0.45, 0.6, 0.75, 0.9])
-            fits = [run({name: g}) for g in grid]
-            i = int(np.argmin([f[0] for f in fits]))
-            best = fits[i] + (float(grid[i]),)
+            grid = amp * np.array([0.0, 0.2, 0.4, 0.6, 0.8])
+            fits = [search({name: g}) for g in grid]
+            i = int(np.argmin(fits))
+            best_gap, best_rss = float(grid[i]), fits[i]
             lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
             if hi > lo:
                 opt = minimize_scalar(
-                    lambda g: run({name: g})[0], bounds=(lo, hi), method="bounded",
-                    options={"xatol": 5e-3 * amp, "maxiter": 6},
+                    lambda g: search({name: g}), bounds=(lo, hi), method="bounded",
+                    options={"xatol": 5e-3 * amp, "maxiter": 5},
                 )  # fmt: skip
-                if opt.fun < best[0]:
-                    best = run({name: float(opt.x)}) + (float(opt.x),)
-            rss, n, theta, known = best[:4]
+                if opt.fun < best_rss:
+                    best_gap = float(opt.x)
+            rss, n, theta, known = run({name: best_gap})
         else:
             rss, n, theta, known = run({})
         values = {p: theta[p] for p in (*law.linear, *law.nonlinear) if p in theta}
@@ -506,9 +545,29 @@ class Screen:
         candidates: Sequence[Candidate],
         n_refine: int = 12,
         progress: Callable | None = None,
+        executor=None,
     ) -> list[ScreenFit]:
         """Fit every candidate in one pass at the data's states, then the best ``n_refine``
-        with the alternations (keeping the better of the two fits); sorted by BIC."""
+        with the alternations (keeping the better of the two fits); sorted by BIC.
+
+        With an ``executor`` the first pass is shared between this process and one job on
+        the executor (:func:`screen_pass`).
+        """
+        cands = list(candidates)
+        later = None
+        if executor is not None and len(cands) > 8:
+            job = ScreenJob(self.model.to_toml(), str(self.model.source), str(self.data.path),
+                            tuple(cands[1::2]), self.predictor.settings["n_harmonics"],
+                            self.predictor.settings["n_time"], self.free)  # fmt: skip
+            later = executor.submit(screen_pass, job)
+            cands = cands[0::2]
+        fits = self.first_pass(cands, progress)
+        if later is not None:
+            fits += later.result()
+        return self.refine(fits, n_refine, progress)
+
+    def first_pass(self, candidates: Sequence[Candidate], progress=None) -> list[ScreenFit]:
+        """One pass of every candidate at the data's states, best first."""
         fits = []
         for i, c in enumerate(candidates):
             try:
@@ -517,18 +576,27 @@ class Screen:
                 log.warning("screen of %s failed: %s", c.label, exc)
             if progress:
                 progress("screen", {"index": i, "n": len(candidates), "label": c.label})
-        fits.sort(key=lambda f: f.bic)
+        return sorted(fits, key=lambda f: f.bic)
+
+    def refine(self, fits: list[ScreenFit], n_refine: int, progress=None) -> list[ScreenFit]:
+        """The best ``n_refine`` fits again with the alternations (the better of the two
+        kept); every fit sorted by BIC."""
+        fits = sorted(fits, key=lambda f: f.bic)
         for i, f in enumerate(fits[:n_refine]):
-            fixed = {p: f.values[p] for p in f.candidate.law.nonlinear if p in f.values}
-            try:
-                g = self.fit(f.candidate, nonlinear=fixed)
-            except (ValueError, np.linalg.LinAlgError) as exc:
-                log.warning("screen of %s failed: %s", f.candidate.label, exc)
-                g = f
-            fits[i] = g if g.bic < f.bic else f  # the better approximation of the two
+            fits[i] = self.refined(f)
             if progress:
                 progress("refine", {"index": i, "n": n_refine, "label": f.candidate.label})
         return sorted(fits, key=lambda f: f.bic)
+
+    def refined(self, f: ScreenFit) -> ScreenFit:
+        """``f`` with the alternations at its clearance, or ``f`` if that is no better."""
+        fixed = {p: f.values[p] for p in f.candidate.law.nonlinear if p in f.values}
+        try:
+            g = self.fit(f.candidate, nonlinear=fixed)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            log.warning("screen of %s failed: %s", f.candidate.label, exc)
+            return f
+        return g if g.bic < f.bic else f
 
     # -- one fit ------------------------------------------------------------------------------
     def _parts(self, fr: _Frame, cand: Candidate | None, B_loc, values: dict):
@@ -576,7 +644,8 @@ class Screen:
             th = {p: (max(v, 1e-30) if p in el.positive_params else v) for p, v in theta.items()}
             element = el.with_params(**th) if th else el
             linear = element.param_names
-        if element.switch_threshold() is not None:
+        sampled = self._sampled and isinstance(law_or_element, Law)  # the candidate only
+        if element.switch_threshold() is not None and not sampled:
             return self._exact_aft(fr, element, X_inc, linear if want_basis else None)
         ev = element.evaluate(u, v, want_basis)
         f = bs.phasors(ev.f)
@@ -592,7 +661,8 @@ class Screen:
 
     def _exact_aft(self, fr, element, X_inc, linear):
         """:func:`_law_eval` for a law whose force jumps: the balance's own AFT, which
-        integrates each jump exactly (sampling it would misplace it by half a sample)."""
+        integrates each jump exactly (sampling it would misplace it by half a sample, and
+        miss the jump's share of the derivative with respect to the clearance)."""
         hb = self._harmonic_basis
         bs = self._basis
         n, H1, m = X_inc.shape
@@ -602,8 +672,17 @@ class Screen:
         names = element.param_names
         basis = None if linear is None else {p: np.zeros((n, H1, m), complex) for p in linear}
         idx = np.array([c for k in bs.order_k for c in (2 * k - 1, 2 * k)])
+        # where the sampled law exerts no force and no sample comes near the switch, the
+        # exact evaluation is zero too: only the other steps are integrated exactly
+        u, v = bs.time(X_inc, fr.omega)
+        ev = element.evaluate(u, v)
+        u_s = element.switch_threshold()[0]
+        span = np.ptp(u, axis=1) + 1e-300
+        idle = np.all(ev.f == 0, axis=1) & (np.abs(u - u_s).min(axis=1) > 0.05 * span)
         for i in range(n):
             for j in range(m):
+                if idle[i, j]:
+                    continue
                 Ue = hb.from_complex(X_inc[i, :, j])
                 F, D, dFp = element_forces(hb, element, Ue, fr.omega[i], True, linear is not None)
                 f[i, :, j] = hb.to_complex(F)
@@ -664,6 +743,7 @@ class Screen:
         return st["X_init"].copy()
 
     def _fit(self, fr, st, cand, B_loc, nonlinear: dict, param=None, n_iterations=None):
+        params = tuple(dict.fromkeys(([param] if param else []) + list(self.free)))
         """Alternate: whitening and unmeasured harmonics at the current values, then the
         linear least squares of every linear parameter. Returns (rss, n, values, known)."""
         bs = self._basis
@@ -756,14 +836,12 @@ class Screen:
             for col in columns:
                 r = np.einsum("nkij,nkj->nki", R_o[:, :, :C, 1:], col[:, bs.order_k])
                 A.append(np.einsum("nij,nj->ni", S, _vec(r * W)).ravel())
-            if param is not None:
-                dR = self._param_derivative(fr, param)  # (n, K, C, 1 + nD)
-                fo = np.concatenate(
-                    [self._F[self.rows][:, :, None], g_total[:, bs.order_k]], axis=2
-                )
+            fo = np.concatenate([self._F[self.rows][:, :, None], g_total[:, bs.order_k]], axis=2)
+            for name in params:
+                dR = self._param_derivative(fr, name)  # (n, K, C, 1 + nD)
                 r = np.einsum("nkij,nkj->nki", dR, fo)
                 A.append(np.einsum("nij,nj->ni", S, _vec(r * W)).ravel())
-                names.append(("param", param))
+                names.append(("param", name))
                 lower.append(-np.inf)
             cur = np.array(
                 [known[nm] if kd == "known" else theta.get(nm, 0.0) if kd == "cand" else 0.0
@@ -773,7 +851,7 @@ class Screen:
             x, rss = _bounded_lsq(Am, y0 + Am @ cur, np.array(lower, float))
             for (kd, nm), v in zip(names, x, strict=True):
                 if kd == "known":
-                    known[nm] = float(v)
+                    known[nm] = max(float(v), 0.0)
                 elif kd == "known_delta":
                     known[nm] = max(float(known[nm] + v), 0.0)
                 elif kd == "param":
@@ -783,6 +861,30 @@ class Screen:
             if it == its:
                 break
         return rss, 2 * K * C * n, theta, known
+
+
+@dataclass(frozen=True)
+class ScreenJob:
+    """A share of a screen's first pass, to run on an executor (:func:`screen_pass`)."""
+
+    model_toml: str
+    source: str
+    data_path: str
+    candidates: tuple[Candidate, ...]
+    n_harmonics: int = 9
+    n_time: int = 128
+    free_parameters: tuple[str, ...] = ()
+
+
+def screen_pass(job: ScreenJob) -> list[ScreenFit]:
+    """The first pass of a screen over ``job.candidates`` (top level, for executors)."""
+    from analysis.measurement_file import read_measurement
+
+    model = Model.from_toml_text(job.model_toml, job.source)
+    data = read_measurement(job.data_path)
+    pred = BranchMatchedPredictor(model, data, n_harmonics=job.n_harmonics, n_time=job.n_time)
+    screen = Screen(model, data, predictor=pred, free_parameters=job.free_parameters)
+    return screen.first_pass(job.candidates)
 
 
 def _bounded_lsq(A: np.ndarray, y: np.ndarray, lower: np.ndarray):

@@ -187,7 +187,8 @@ def _growth(cmp: Comparison, sigma: np.ndarray, gate: float) -> list[Finding]:
         elif sig and order == "3":
             points = ("hardening",) if gm > gp else ("softening", "damping")
         out.append(Finding(f"growth_order_{order}", sig, text,
-                           {"measured": gm, "model": gp, "n": len(em)}, points))  # fmt: skip
+                           {"order": order, "measured": gm, "model": gp, "n": len(em)},
+                           points))  # fmt: skip
     return out
 
 

@@ -52,7 +52,8 @@ class VerifyJob:
         The stepped-sine file.
     rows : tuple of int or None
         Steps used (None: all).
-    candidate : Candidate
+    candidate : Candidate or None
+        None: the model's own parameters recalibrated (the baseline of the ranking).
     values : dict
         Start values of the candidate's parameters (the screen's estimate).
     known : dict
@@ -63,19 +64,30 @@ class VerifyJob:
     n_starts : int
         Further Latin hypercube starts.
     seed : int
+    start_toml : str or None
+        The model with the candidate already added and its linear parameters recalibrated on
+        the linear test (:mod:`analysis.diagnosis.linear_screen`); used instead of adding it.
+    n_harmonics, n_time : int
+        Balance settings.
+    max_seconds : float or None
+        Time allowed for the recalibration (the last accepted iterate is kept).
     """
 
     model_toml: str
     source: str
     data_path: str
     rows: tuple[int, ...] | None
-    candidate: Candidate
+    candidate: Candidate | None
     values: Mapping[str, float]
     known: Mapping[str, float]
     linear_run: str | None = None
     max_iterations: int = 12
     n_starts: int = 0
     seed: int = 0
+    start_toml: str | None = None
+    n_harmonics: int = 9
+    n_time: int = 128
+    max_seconds: float | None = None
 
 
 @dataclass
@@ -101,7 +113,7 @@ class Verified:
     message : str
     """
 
-    candidate: Candidate
+    candidate: Candidate | None
     parameters: dict[str, float]
     step_chi2: np.ndarray
     values_per_step: int
@@ -114,6 +126,16 @@ class Verified:
     @property
     def failed(self) -> bool:
         return not np.isfinite(self.step_chi2).any()
+
+    def last_decrease(self) -> float:
+        """Share by which the last iteration lowered the metric (0 without two)."""
+        h = [x["chi2_per_dof"] for x in self.history if np.isfinite(x.get("chi2_per_dof", 0))]
+        return 1.0 - h[-1] / h[-2] if len(h) >= 2 and h[-2] > 0 else 0.0
+
+    @property
+    def stopped(self) -> bool:
+        """The recalibration ran out of its time before it converged."""
+        return self.message.startswith("stopped")
 
     def chi2_per_dof(self, rows: np.ndarray | None = None) -> float:
         z = self.step_chi2 if rows is None else self.step_chi2[rows]
@@ -181,7 +203,8 @@ def run_verify(job: VerifyJob) -> Verified:
     try:
         return _verify(job, t0)
     except Exception as exc:  # a worker must return, whatever the candidate does
-        log.warning("verification of %s failed: %s", job.candidate.label, exc)
+        label = "the model" if job.candidate is None else job.candidate.label
+        log.warning("verification of %s failed: %s", label, exc)
         return Verified(job.candidate, {}, np.full(0, np.nan), 1, "", message=str(exc),
                         seconds=time.perf_counter() - t0)  # fmt: skip
 
@@ -189,42 +212,52 @@ def run_verify(job: VerifyJob) -> Verified:
 def _verify(job: VerifyJob, t0: float) -> Verified:
     model = Model.from_toml_text(job.model_toml, job.source)
     data = read_measurement(job.data_path)
-    if job.rows is not None:
-        data = data.take(np.asarray(job.rows))
     cand = job.candidate
-    m2, new = cand.apply(model, dict(job.values))
-    if cand.law.kind == "parameter":
-        m2 = m2.with_values({cand.parameter: job.values[cand.parameter]})
-    known_names = [n for n in model.parameter_names(group="nonlinear", calibrate=True)]
+    known_names = list(model.parameter_names(group="nonlinear", calibrate=True))
+    linear_info = None
+    if cand is None:
+        m2, new = model, []
+    elif job.start_toml is not None:
+        m2 = Model.from_toml_text(job.start_toml, job.source)
+        new = [n for n in cand.parameter_names().values() if n in m2.parameters]
+        linear_info = {"parameters": {n: m2.parameters[n].value for n in new}}
+    else:
+        m2, new = cand.apply(model, dict(job.values))
+        if cand.law.kind == "parameter":
+            m2 = m2.with_values({cand.parameter: job.values[cand.parameter]})
+        if cand.is_linear and job.linear_run is not None:
+            m2, linear_info = _linear_recalibration(m2, job.linear_run, new)
     start = {}
     for n, v in job.known.items():
         if n in m2.parameters:
             p = m2.parameters[n]
             start[n] = float(np.clip(v, p.lower, p.upper))
     m2 = m2.with_values(start)
-    linear_info = None
-    if cand.is_linear and job.linear_run is not None:
-        m2, linear_info = _linear_recalibration(m2, job.linear_run, new)
-        new = [n for n in new if m2.parameters[n].group != "linear"]
-    names = list(dict.fromkeys([*new, *known_names, *damping_parameters(cand, m2, data)]))
+    damping = [] if cand is None else damping_parameters(cand, m2, data)
+    names = list(dict.fromkeys([*new, *known_names, *damping]))
     dists = None
     if job.n_starts:
         plain = [n for n in names if not n.startswith("zeta_")]
         dists = start_distributions(m2, plain, {}) | {
             n: Distribution("loguniform", 0.002, 0.05) for n in names if n.startswith("zeta_")
         }
+    rows = np.flatnonzero(np.asarray(data.control_converged, bool))
     message = ""
     try:
         r = refit(
-            m2, data, names, starts=[], distributions=dists, n_random_starts=job.n_starts,
-            seed=job.seed, max_iterations=job.max_iterations, ftol=1e-4,
+            m2, data, names, rows=rows if rows.size else None, starts=[],
+            distributions=dists, n_random_starts=job.n_starts, seed=job.seed,
+            max_iterations=job.max_iterations, ftol=1e-4, n_harmonics=job.n_harmonics,
+            n_time=job.n_time, max_seconds=job.max_seconds,
         )  # fmt: skip
         fitted, history, params = r.model, r.history, r.parameters
         message = r.lm.message if r.lm is not None else ""
     except (RuntimeError, ValueError) as exc:
-        log.warning("verification of %s failed: %s", cand.label, exc)
+        label = "the model" if cand is None else cand.label
+        log.warning("verification of %s failed: %s", label, exc)
         fitted, history, params, message = m2, [], {}, str(exc)
-    cmp = compare(fitted, data, predictor=BranchMatchedPredictor(fitted, data))
+    pred = BranchMatchedPredictor(fitted, data, n_harmonics=job.n_harmonics, n_time=job.n_time)
+    cmp = compare(fitted, data, predictor=pred)
     z = np.abs(cmp.residual) ** 2
     step = 2 * z.sum(axis=(1, 2))
     step[~np.all(np.isfinite(z), axis=(1, 2))] = np.nan

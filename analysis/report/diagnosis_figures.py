@@ -23,8 +23,10 @@ __all__ = [
     "plot_before_after",
     "plot_diagnosis",
     "plot_error_history",
+    "plot_evidence",
     "plot_frequency_level_map",
     "plot_measured_vs_model_levels",
+    "plot_ranking",
     "plot_sensor_order_level_map",
 ]
 
@@ -125,14 +127,16 @@ def plot_before_after(before, after, path: str | Path, *, title: str = "") -> Pa
     """Residual maps of the model before and after the change (sensor x order x level, and
     frequency x level), on one colour scale."""
     K = len(before.orders)
-    fig = plt.figure(figsize=(3.2 * K + 1.5, 8.5))
-    gs = fig.add_gridspec(4, K)
+    fig = plt.figure(figsize=(3.2 * K + 1.5, 11.0))
+    gs = fig.add_gridspec(4, K, hspace=0.75, wspace=0.35)
     for r, (cmp, name) in enumerate(((before, "before"), (after, "after"))):
         axes = [fig.add_subplot(gs[r, k]) for k in range(K)]
-        im = _sensor_order_level(axes, cmp, f"{name} ({cmp.rms_over_noise:.3g} x noise): ")
+        im = _sensor_order_level(axes, cmp, f"{name}: ")
+        axes[0].set_ylabel(f"{name}: {cmp.rms_over_noise:.3g} x noise", fontsize=9)
         ax = fig.add_subplot(gs[2 + r, :])
         _frequency_level(ax, cmp)
-        ax.set_title(f"{name}: by frequency and level", fontsize=9)
+        ax.set_title(f"{name} ({cmp.rms_over_noise:.3g} x noise), by frequency and level",
+                     fontsize=9)  # fmt: skip
     fig.colorbar(im, ax=fig.axes, label="rms residual / noise", shrink=0.6)
     if title:
         fig.suptitle(title)
@@ -141,14 +145,100 @@ def plot_before_after(before, after, path: str | Path, *, title: str = "") -> Pa
     return Path(path)
 
 
+def plot_evidence(evidence, path: str | Path, *, title: str = "") -> Path:
+    """The signature tests in figures: resonance frequency and normalised peak height by
+    level (measured and model) and the growth exponent of each order, with each finding's
+    sentence below."""
+    found = {f.name: f for f in evidence.findings}
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
+    res = found.get("resonance_shift")
+    if res is not None and res.values:
+        lv = res.values["levels_n"]
+        axes[0].plot(lv, res.values["measured_hz"], "o-", label="measured")
+        axes[0].plot(lv, res.values["model_hz"], "s--", label="model")
+        axes[0].set_xlabel("level [N]")
+        axes[0].set_ylabel("resonance [Hz]")
+        axes[0].legend()
+    axes[0].set_title("resonance by level", fontsize=9)
+    peak = found.get("peak_height")
+    if peak is not None and peak.values and res is not None:
+        lv = res.values["levels_n"]
+        axes[1].plot(lv, peak.values["measured"], "o-", label="measured")
+        axes[1].plot(lv, peak.values["model"], "s--", label="model")
+        axes[1].set_xlabel("level [N]")
+        axes[1].set_ylabel("peak |H1| / lowest level's")
+        axes[1].legend()
+    axes[1].set_title("normalised peak height", fontsize=9)
+    growth = [f for f in evidence.findings if f.name.startswith("growth")]
+    if growth:
+        labels = [f.values.get("order", "?") for f in growth]
+        x = np.arange(len(growth))
+        axes[2].bar(x - 0.2, [f.values.get("measured", np.nan) for f in growth], 0.4,
+                    label="measured")  # fmt: skip
+        axes[2].bar(x + 0.2, [f.values.get("model", np.nan) for f in growth], 0.4, label="model")
+        axes[2].set_xticks(x, [f"order {o}" for o in labels])
+        axes[2].set_ylabel("d log|Y| / d log F")
+        axes[2].legend()
+    axes[2].set_title("growth exponent by order", fontsize=9)
+    text = "\n".join(
+        ("[x] " if f.significant else "[ ] ") + _wrap(f.text) for f in evidence.findings
+    )
+    fig.text(0.01, -0.02, text, va="top", ha="left", fontsize=7.5, family="monospace")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(Path(path), dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return Path(path)
+
+
+def _wrap(text: str, width: int = 150) -> str:
+    import textwrap
+
+    return "\n    ".join(textwrap.wrap(text, width))
+
+
+def plot_ranking(diagnosis, path: str | Path, *, title: str = "") -> Path:
+    """The verified candidates: residual over noise after everything was recalibrated (bars,
+    log scale) and delta BIC against the recalibrated model; the tied group highlighted."""
+    ranking = diagnosis.ranking
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 0.45 * max(len(ranking), 2) + 1.8),
+                                   sharey=True)  # fmt: skip
+    labels = [r.candidate.label for r in ranking]
+    y = np.arange(len(ranking))
+    colours = ["C2" if r.group == 1 and diagnosis.verdict == "explained" else "C0"
+               for r in ranking]  # fmt: skip
+    ax1.barh(y, [r.rms_over_noise for r in ranking], color=colours)
+    ax1.axvline(diagnosis.settings.explained_rms, color="0.3", ls="--", lw=1,
+                label="explained below")  # fmt: skip
+    if diagnosis.refit is not None:
+        ax1.axvline(diagnosis.refit_rms, color="C3", ls=":", lw=1.5,
+                    label="model, own parameters recalibrated")  # fmt: skip
+    ax1.set_xscale("log")
+    ax1.set_yticks(y, labels, fontsize=8)
+    ax1.invert_yaxis()
+    ax1.set_xlabel("residual / noise after recalibration")
+    ax1.legend(fontsize=7)
+    ax2.barh(y, [r.delta_bic for r in ranking], color=colours)
+    ax2.axvline(0, color="0.3", lw=1)
+    ax2.set_xlabel("delta BIC against the recalibrated model (negative: better)")
+    fig.suptitle(title or f"verdict: {diagnosis.verdict}", fontsize=10)
+    return _save(fig, path)
+
+
 def plot_diagnosis(diagnosis, folder: str | Path) -> list[Path]:
-    """The figures of a diagnosis in ``folder``: the two residual maps and measured vs model."""
+    """The figures of a diagnosis in ``folder``: the two residual maps, measured vs model, the
+    evidence and (when candidates were verified) the ranking."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     cmp = diagnosis.comparison
-    return [
+    out = [
         plot_sensor_order_level_map(cmp, folder / "residual_sensor_order_level.png",
                                     title=f"model vs file: {cmp.rms_over_noise:.3g} x noise"),
         plot_frequency_level_map(cmp, folder / "residual_frequency_level.png"),
         plot_measured_vs_model_levels(cmp, folder / "measured_vs_model.png"),
+        plot_evidence(diagnosis.evidence, folder / "evidence.png"),
     ]  # fmt: skip
+    if diagnosis.ranking:
+        out.append(plot_ranking(diagnosis, folder / "ranking.png"))
+    return out

@@ -88,11 +88,12 @@ def _suspension_peak(truth: str) -> float:
 
 
 @pytest.mark.slow
-def test_hardening_mounts_bias_the_low_level_random_test() -> None:
+def test_hardening_mounts_leave_the_low_level_random_test_linear() -> None:
     reference = _suspension_peak("reference")
     hardened = _suspension_peak("hardening_mounts")
     assert reference == pytest.approx(11.0, abs=0.5)  # the frame bouncing on its mounts
-    assert hardened - reference > 0.5
+    # the mounts' cubic term acts at the stepped sine's amplitudes, not at the random test's
+    assert abs(hardened - reference) <= 0.25  # one frequency line
 
 
 def test_paper_style_run_is_far_faster_than_real_time() -> None:

@@ -1,0 +1,304 @@
+"""Settings and result of a diagnosis: the ranking, the verdict, the summary in words."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from analysis.diagnosis.candidates import Candidate
+from analysis.diagnosis.compare import Comparison
+from analysis.diagnosis.linear_screen import LinearFit
+from analysis.diagnosis.screen import ScreenFit
+from analysis.diagnosis.signatures import Evidence
+from analysis.diagnosis.verify import Verified
+
+__all__ = ["Diagnosis", "DiagnosisSettings", "RankedCandidate"]
+
+
+@dataclass(frozen=True)
+class DiagnosisSettings:
+    """Settings of :func:`~analysis.diagnosis.diagnose.diagnose`.
+
+    Parameters
+    ----------
+    adequate_rms : float
+        A model whose residual (root of chi-square per degree of freedom) is at most this,
+        as it is or with its own parameters recalibrated, is adequate: nothing is claimed.
+    explained_rms : float
+        A verified candidate explains the misfit when it brings the residual to at most this
+        (above ``adequate_rms``: a law whose force switches sharply, friction, leaves some of
+        its harmonics beyond the balance's).
+    tie_bic : float
+        Candidates within this BIC of the best are reported as a group.
+    linear_bic, linear_ratio : float
+        A linear candidate is verified on the stepped sine when it lowers the BIC of the
+        linear test by more than ``linear_bic`` and its metric to ``linear_ratio`` of the
+        model's or less (the linear test's neighbouring frequencies are correlated, so a BIC
+        gain alone can be a fit of small errors).
+    n_verify : int
+        Distinct laws of the screen verified in the full model (the best law also at its
+        second location).
+    n_refine : int
+        Best screened candidates refined by the screen's alternations.
+    verify_iterations : int
+        Levenberg-Marquardt iterations per verification.
+    verify_seconds : float
+        Time allowed for one verification's Levenberg-Marquardt (its last iterate is scored).
+    continue_seconds, continue_decrease : float
+        When no candidate explains the misfit, the (at most two) verifications stopped for
+        time while their last iteration still lowered the metric by ``continue_decrease`` or
+        more (a share) go on for ``continue_seconds`` from where they stopped.
+    n_starts : int
+        Further Latin hypercube starts for the best two when no candidate reaches the noise.
+    workers : int
+        Processes for the verifications and the linear screen (1: in this process).
+    n_harmonics, n_time : int
+        Balance settings of every prediction.
+    time_budget_s : float
+        The second stage of verifications and the further starts begin only before this
+        much time has passed since the diagnosis started.
+    restart_fraction : float
+        Further starts are tried only for a best candidate that brought the residual of the
+        recalibrated model down to this fraction or below (a strong effect stuck in a local
+        minimum), not for one that explains little.
+    """
+
+    adequate_rms: float = 1.5
+    explained_rms: float = 2.0
+    tie_bic: float = 10.0
+    linear_bic: float = 10.0
+    linear_ratio: float = 0.3
+    n_verify: int = 2
+    n_refine: int = 6
+    verify_iterations: int = 8
+    verify_seconds: float = 12.0
+    continue_seconds: float = 30.0
+    continue_decrease: float = 0.1
+    n_starts: int = 4
+    workers: int = 2
+    n_harmonics: int = 9
+    n_time: int = 128
+    time_budget_s: float = 45.0
+    restart_fraction: float = 0.2
+
+    def __post_init__(self) -> None:
+        if self.adequate_rms <= 0 or self.explained_rms <= 0 or self.tie_bic < 0:
+            raise ValueError("DiagnosisSettings: thresholds must be positive")
+        if self.n_verify < 1 or self.workers < 1 or self.verify_iterations < 1:
+            raise ValueError("DiagnosisSettings: n_verify, workers, iterations must be >= 1")
+
+
+@dataclass
+class RankedCandidate:
+    """A verified candidate in the final ranking.
+
+    Attributes
+    ----------
+    rank : int
+        1 = best.
+    group : int
+        Candidates with the same group number tie (within ``tie_bic``).
+    delta_bic : float
+        BIC minus that of the model with its own parameters recalibrated (negative: better).
+    screen : ScreenFit or None
+        The screen's fit (None for a candidate proposed by the linear test).
+    linear : LinearFit or None
+        The linear test's recalibration with this candidate.
+    """
+
+    rank: int
+    group: int
+    candidate: Candidate
+    bic: float
+    delta_bic: float
+    rms_over_noise: float
+    verified: Verified
+    screen: ScreenFit | None = None
+    linear: LinearFit | None = None
+
+    def start_values(self) -> tuple[dict, dict]:
+        """Start values ``(values, known)`` for :func:`~analysis.diagnosis.augment.augment`:
+        the recalibrated values of this candidate's parameters and the model's own."""
+        names = self.candidate.parameter_names()
+        back = {v: k for k, v in names.items()}
+        values = {back[n]: v for n, v in self.verified.parameters.items() if n in back}
+        known = {n: v for n, v in self.verified.parameters.items() if n not in back}
+        if self.screen is not None:
+            values = {**self.screen.values, **values}
+        return values, known
+
+    def to_json(self) -> dict:
+        return {
+            "rank": self.rank,
+            "group": self.group,
+            "label": self.candidate.label,
+            "kind": self.candidate.law.kind,
+            "location": self.candidate.location.name,
+            "linear": self.candidate.is_linear,
+            "n_params": self.candidate.n_params,
+            "bic": self.bic,
+            "delta_bic": self.delta_bic,
+            "rms_over_noise": self.rms_over_noise,
+            "parameters": self.verified.parameters,
+            "seconds": self.verified.seconds,
+        }
+
+
+@dataclass
+class Diagnosis:
+    """Result of :func:`~analysis.diagnosis.diagnose.diagnose`.
+
+    Attributes
+    ----------
+    verdict : {"adequate", "explained", "unexplained"}
+    comparison : Comparison
+        The model against the file (before any change).
+    evidence : Evidence
+    screen : list of ScreenFit
+        Every screened candidate, best first; ``baseline`` the model's own fit.
+    linear : list of LinearFit
+        Linear candidates on the linear test, best first (empty without a linear test).
+    refit : Verified or None
+        The model with its own parameters recalibrated on the stepped sine.
+    ranking : list of RankedCandidate
+        Verified candidates, best first.
+    model_bic : float
+        BIC of ``refit`` on the ranking's steps.
+    recommendation : dict or None
+        For a group: the measurement that separates its members best.
+    timings : dict of str to float, s
+    """
+
+    verdict: str
+    comparison: Comparison
+    evidence: Evidence
+    screen: list[ScreenFit] = field(default_factory=list)
+    baseline: ScreenFit | None = None
+    linear: list[LinearFit] = field(default_factory=list)
+    refit: Verified | None = None
+    ranking: list[RankedCandidate] = field(default_factory=list)
+    model_bic: float = math.nan
+    recommendation: dict | None = None
+    timings: dict[str, float] = field(default_factory=dict)
+    settings: DiagnosisSettings = field(default_factory=DiagnosisSettings)
+
+    @property
+    def group(self) -> list[RankedCandidate]:
+        """The best and those tied with it, when the misfit is explained (else empty)."""
+        if self.verdict != "explained":
+            return []
+        return [r for r in self.ranking if r.group == 1]
+
+    @property
+    def best(self) -> RankedCandidate | None:
+        return self.ranking[0] if self.ranking and self.verdict == "explained" else None
+
+    @property
+    def refit_rms(self) -> float:
+        return self.refit.rms_over_noise() if self.refit is not None else math.nan
+
+    def rank_of(self, kind: str, location: str, side: int | None = None) -> int | None:
+        """Rank (1 = best) of a law at a location among the verified candidates, with ties:
+        a candidate in the best group counts as first; None if not verified."""
+        for r in self.ranking:
+            c = r.candidate
+            if (
+                c.law.kind == kind
+                and c.location.name == location
+                and (side is None or c.law.options.get("side") == side)
+            ):
+                return 1 if r.group == 1 else r.rank
+        return None
+
+    def summary(self, n: int = 8) -> str:
+        cmp = self.comparison
+        lines = [
+            f"model against the file: residual {cmp.rms_over_noise:.3g} x noise "
+            f"(chi2/dof {cmp.chi2_per_dof:.3g})"
+            + (f"; {cmp.left_out.size} step(s) not converged under force control left out"
+               if cmp.left_out.size else ""),
+            self.evidence.summary(),
+        ]  # fmt: skip
+        if self.refit is not None:
+            lines.append(
+                f"the model's own parameters recalibrated: residual {self.refit_rms:.3g} x noise"
+                " (" + ", ".join(f"{k} {v:.4g}" for k, v in self.refit.parameters.items()) + ")"
+            )
+        if self.verdict == "adequate":
+            lines.append(
+                "verdict: the model is adequate (residual at the noise"
+                + (" once its own parameters are recalibrated" if self.refit is not None else "")
+                + "); nothing is claimed"
+            )
+            return "\n".join(lines)
+        if self.linear:
+            lines.append("linear test, each linear candidate with the linear parameters "
+                         "recalibrated (delta BIC against the model):")  # fmt: skip
+            for f in self.linear[:4]:
+                lines.append(
+                    f"  {f.delta_bic:10.1f}  {f.candidate.label}  "
+                    + ", ".join(f"{k} {v:.4g}" for k, v in f.values.items())
+                )
+        if self.baseline is not None and self.screen:
+            lines.append(f"screen ({len(self.screen)} candidates; delta BIC against the model):")
+            for f in self.screen[:n]:
+                lines.append(
+                    f"  {f.bic - self.baseline.bic:10.1f}  {f.candidate.label}  "
+                    + ", ".join(f"{k} {v:.4g}" for k, v in f.values.items())
+                )
+        lines.append("verified in the full model (everything recalibrated):")
+        for r in self.ranking:
+            lines.append(
+                f"  #{r.rank} (group {r.group}) {r.candidate.label}: residual "
+                f"{r.rms_over_noise:.3g} x noise, delta BIC {r.delta_bic:.1f}, "
+                + ", ".join(f"{k} {v:.4g}" for k, v in r.verified.parameters.items())
+            )
+        if self.verdict == "explained":
+            g = self.group
+            kind = "a linear effect" if g[0].candidate.is_linear else "a nonlinear effect"
+            if len(g) == 1:
+                lines.append(f"verdict: explained by {g[0].candidate.label} ({kind})")
+            else:
+                lines.append(
+                    f"verdict: explained ({kind}); tied within {self.settings.tie_bic:g} BIC: "
+                    + "; ".join(r.candidate.label for r in g)
+                    + f" (the simplest first: {g[0].candidate.label})"
+                )
+        else:
+            best = self.ranking[0] if self.ranking else None
+            lines.append(
+                "verdict: nothing in the element library explains the misfit"
+                + (f"; the best, {best.candidate.label}, leaves {best.rms_over_noise:.3g} x "
+                   "noise" if best else "")
+            )  # fmt: skip
+        if self.recommendation:
+            lines.append("to separate the tied candidates: " + self.recommendation["text"])
+        return "\n".join(lines)
+
+    def to_json(self) -> dict:
+        base = self.baseline.bic if self.baseline is not None else 0.0
+        return {
+            "verdict": self.verdict,
+            "comparison": {
+                "chi2_per_dof": self.comparison.chi2_per_dof,
+                "rms_over_noise": self.comparison.rms_over_noise,
+                "adequate": self.comparison.adequate,
+                "left_out_steps": self.comparison.left_out.tolist(),
+            },
+            "evidence": self.evidence.to_json(),
+            "refit": None if self.refit is None else {
+                "rms_over_noise": self.refit_rms, "parameters": self.refit.parameters},
+            "linear": [
+                {"label": f.candidate.label, "delta_bic": f.delta_bic, "values": f.values}
+                for f in self.linear[:10]
+            ],
+            "screen": [
+                {"label": f.candidate.label, "delta_bic": f.bic - base, "chi2_per_dof":
+                 f.chi2_per_dof, "values": f.values, "known": f.known}
+                for f in self.screen[:30]
+            ],
+            "ranking": [r.to_json() for r in self.ranking],
+            "group": [r.candidate.label for r in self.group],
+            "recommendation": self.recommendation,
+            "timings": self.timings,
+        }  # fmt: skip

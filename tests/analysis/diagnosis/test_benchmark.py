@@ -1,0 +1,31 @@
+"""The diagnosis benchmark's plan and its figures' form (the full run is the benchmark)."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+from benchmarks.diagnose import TRUE_EFFECTS, benchmark_plan, cache_dir
+
+
+def test_the_plan_is_the_papers_with_the_force_held_clean() -> None:
+    plan = benchmark_plan()
+    ex = plan.excitation
+    assert ex.orders == tuple(Fraction(k) for k in range(1, 9))
+    assert ex.relative_amplitudes[:3] == (1.0, 0.02, 0.02)
+    assert all(a == 0.0 for a in ex.relative_amplitudes[3:])
+    assert ex.levels_n == (2.0, 4.0, 6.0, 8.0) and plan.points == (3, 6, 7)
+    quick = benchmark_plan(quick=True)
+    assert quick.excitation.levels_n == (2.0, 5.0, 8.0) and quick.name != plan.name
+
+
+def test_every_hidden_effect_names_a_library_candidate(
+    reference_model, tmp_path, monkeypatch
+) -> None:
+    from analysis.diagnosis import default_candidates
+
+    labels = {(c.law.kind, c.location.name, c.law.options.get("side"))
+              for c in default_candidates(reference_model)}  # fmt: skip
+    for truth, effect in TRUE_EFFECTS.items():
+        assert effect in labels, truth
+    monkeypatch.setenv("CLEARANCE_RIG_CACHE", str(tmp_path))
+    assert cache_dir() == tmp_path
