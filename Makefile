@@ -17,7 +17,7 @@ $(VENV)/.installed: pyproject.toml
 setup: $(VENV)/.installed
 
 demo: setup
-	$(PY) -m analysis demo --out demo-output
+	$(PY) -m rig workflow --out demo-output
 
 test: setup
 	QT_QPA_PLATFORM=offscreen $(PY) -m pytest -q

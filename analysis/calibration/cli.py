@@ -13,13 +13,17 @@ import time
 from pathlib import Path
 
 from analysis.calibration.crossval import cross_validate
-from analysis.calibration.nonlinear import CalibrationSettings, calibrate_nonlinear, level_rows
+from analysis.calibration.nonlinear import (
+    CalibrationSettings,
+    calibrate_nonlinear,
+    level_rows,
+    make_predictor,
+)
 from analysis.calibration.results import load_calibration, save_calibration
 from analysis.calibration.validation import validate
 from analysis.executors import make_executor
 from analysis.measurement_file import SteppedSineData, read_measurement
 from analysis.model import load_model
-from analysis.predict import SteppedSinePredictor
 
 __all__ = ["add_parsers"]
 
@@ -60,9 +64,7 @@ def _stepped(path: str) -> SteppedSineData:
 def _fit_figure(model, data, params, st, out: Path, levels, name: str, title: str):
     from analysis.report import plot_measured_vs_model
 
-    pred = SteppedSinePredictor(
-        model, data, channels=st.channels, n_harmonics=st.n_harmonics, n_time=st.n_time
-    )
+    pred = make_predictor(model, data, st)
     H, _ = pred.measured()
     rows = level_rows(data, levels)
     p = pred.predict(params, rows=rows)
@@ -87,6 +89,8 @@ def cmd_calibrate(args) -> dict:
         seed=args.seed,
         weighting="identity" if args.identity else "uncertainty",
         max_iterations=args.max_iterations,
+        match_branches=not args.plain_continuation,
+        include_unconverged=args.include_unconverged,
     )
     out = Path(args.out)
     t0 = time.perf_counter()
@@ -193,6 +197,17 @@ def add_parsers(sub) -> None:
         help="best Latin hypercube candidates refined by LM (the paper: 1)",
     )
     sp.add_argument("--max-iterations", type=int, default=50)
+    sp.add_argument(
+        "--plain-continuation",
+        action="store_true",
+        help="predict by forward continuation in the sweep order only (default: on the "
+        "branch the test was on, where the rig left a resonant branch before its fold)",
+    )
+    sp.add_argument(
+        "--include-unconverged",
+        action="store_true",
+        help="also fit the steps not converged under force control",
+    )
     sp.add_argument(
         "--identity", action="store_true", help="W = I (the paper) instead of 1/sigma^2"
     )

@@ -23,11 +23,11 @@ from analysis.calibration.lm import least_squares_lm
 from analysis.calibration.nonlinear import (
     NonlinearCalibration,
     ObjectiveSpec,
-    level_rows,
+    fitted_rows,
+    make_predictor,
 )
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
-from analysis.predict import SteppedSinePredictor
 
 __all__ = ["CrossValidation", "cross_validate"]
 
@@ -110,17 +110,15 @@ def cross_validate(
     t0 = time.perf_counter()
     st = calibration.settings
     space = calibration.space
-    pred = SteppedSinePredictor(
-        model, data, channels=st.channels, n_harmonics=st.n_harmonics, n_time=st.n_time
-    )
+    pred = make_predictor(model, data, st)
     folds, masks = [], []
     for lv in calibration.calibration_levels_n:
-        rows = level_rows(data, [lv])
+        rows = fitted_rows(data, [lv], st)
         for c, name in enumerate(pred.channel_names):
             folds.append(f"{name} @ {lv:g} N")
             masks.append((rows, c))
     base = np.zeros((data.n_steps, len(pred.channel_names)), bool)
-    base[level_rows(data, calibration.calibration_levels_n)] = True
+    base[fitted_rows(data, calibration.calibration_levels_n, st)] = True
     specs = []
     for rows, c in masks:
         m = base.copy()
@@ -135,6 +133,7 @@ def cross_validate(
                 st.channels,
                 st.n_harmonics,
                 st.n_time,
+                st.match_branches,
             )
         )
     bounds = space.theta_bounds()

@@ -21,8 +21,16 @@ from analysis.calibration.parameters import ParameterSpace
 from analysis.measurement_file import SteppedSineData, read_measurement
 from analysis.model import Model
 from analysis.predict import SteppedSinePredictor
+from analysis.predict_branches import BranchMatchedPredictor
 
-__all__ = ["CalibrationSettings", "NonlinearCalibration", "calibrate_nonlinear", "level_rows"]
+__all__ = [
+    "CalibrationSettings",
+    "NonlinearCalibration",
+    "calibrate_nonlinear",
+    "fitted_rows",
+    "level_rows",
+    "make_predictor",
+]
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +60,15 @@ class CalibrationSettings:
         Default: the paper's (k_c, gap, v_c).
     max_iterations : int
     n_harmonics, n_time : int
+    match_branches : bool
+        Predict on the branch the test was on
+        (:class:`~analysis.predict_branches.BranchMatchedPredictor`): where the rig left a
+        resonant branch before its fold, the model's forward continuation would not, and those
+        few steps would misfit by hundreds of standard errors whatever the parameters. False
+        gives the plain forward continuation of the measured sweep order.
+    include_unconverged : bool
+        Also fit the steps the file marks as not converged under force control (their force
+        is off target and the response may not have settled).
     """
 
     parameters: tuple[str, ...] = ("k_c", "gap", "v_c")
@@ -66,6 +83,8 @@ class CalibrationSettings:
     max_iterations: int = 50
     n_harmonics: int = 9
     n_time: int = 128
+    match_branches: bool = True
+    include_unconverged: bool = False
 
     def __post_init__(self) -> None:
         if not self.parameters:
@@ -92,6 +111,28 @@ def level_rows(data: SteppedSineData, levels_n: Sequence[float]) -> np.ndarray:
         if not np.isclose(data.levels_n[i], lv, rtol=1e-6):
             raise ValueError(f"{data.path}: no level {lv} N (levels: {list(data.levels_n)})")
     return np.flatnonzero(np.isin(data.level_index, idx))
+
+
+def fitted_rows(
+    data: SteppedSineData, levels_n: Sequence[float], settings: CalibrationSettings
+) -> np.ndarray:
+    """Row indices of the steps at the given levels that a calibration fits: those converged
+    under force control (every step with ``settings.include_unconverged``)."""
+    rows = level_rows(data, levels_n)
+    if settings.include_unconverged:
+        return rows
+    return rows[np.asarray(data.control_converged, bool)[rows]]
+
+
+def make_predictor(
+    model: Model, data: SteppedSineData, settings: CalibrationSettings
+) -> SteppedSinePredictor:
+    """The predictor a calibration with ``settings`` uses (see ``match_branches``)."""
+    kind = BranchMatchedPredictor if settings.match_branches else SteppedSinePredictor
+    return kind(
+        model, data, channels=settings.channels, n_harmonics=settings.n_harmonics,
+        n_time=settings.n_time,
+    )  # fmt: skip
 
 
 def split_levels(data: SteppedSineData, settings: CalibrationSettings):
@@ -210,13 +251,16 @@ class ObjectiveSpec:
     channels: tuple[str, ...] | None
     n_harmonics: int
     n_time: int
+    match_branches: bool = True
 
     def build(self) -> FRFObjective:
         model = Model.from_toml_text(self.model_toml, source="<calibration model>")
         data = read_measurement(self.data_path)
-        pred = SteppedSinePredictor(
-            model, data, channels=self.channels, n_harmonics=self.n_harmonics, n_time=self.n_time
-        )
+        settings = CalibrationSettings(
+            channels=self.channels, n_harmonics=self.n_harmonics, n_time=self.n_time,
+            match_branches=self.match_branches,
+        )  # fmt: skip
+        pred = make_predictor(model, data, settings)
         return FRFObjective(
             pred, ParameterSpace.from_model(model, self.names), self.mask, self.weighting
         )
@@ -283,11 +327,9 @@ def calibrate_nonlinear(
     """
     st = settings or CalibrationSettings()
     cal_levels, val_level = split_levels(data, st)
-    rows = level_rows(data, cal_levels)
+    rows = fitted_rows(data, cal_levels, st)
     space = ParameterSpace.from_model(model, st.parameters)
-    predictor = SteppedSinePredictor(
-        model, data, channels=st.channels, n_harmonics=st.n_harmonics, n_time=st.n_time
-    )
+    predictor = make_predictor(model, data, st)
     mask = np.zeros((data.n_steps, len(predictor.channel_indices)), bool)
     mask[rows] = True
     objective = FRFObjective(predictor, space, mask, st.weighting)
@@ -300,6 +342,7 @@ def calibrate_nonlinear(
         st.channels,
         st.n_harmonics,
         st.n_time,
+        st.match_branches,
     )
     dists = dict(st.distributions or {})
     if not dists and set(st.parameters) <= {"k_c", "gap", "v_c"}:

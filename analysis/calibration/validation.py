@@ -13,10 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.calibration.nonlinear import NonlinearCalibration, level_rows
+from analysis.calibration.nonlinear import NonlinearCalibration, fitted_rows, make_predictor
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
-from analysis.predict import SteppedSinePredictor
 
 __all__ = ["Validation", "validate"]
 
@@ -93,10 +92,8 @@ def validate(
     if lv is None:
         raise ValueError("no validation level: the file has a single level; name one")
     st = calibration.settings
-    rows = level_rows(data, [lv])
-    pred = SteppedSinePredictor(
-        model, data, channels=st.channels, n_harmonics=st.n_harmonics, n_time=st.n_time
-    )
+    rows = fitted_rows(data, [lv], st)
+    pred = make_predictor(model, data, st)
     names = list(calibration.space.names)
     p = pred.predict(calibration.parameters, names, rows=rows)
     H, sH = pred.measured()

@@ -41,7 +41,7 @@ def files(tmp_path_factory):
     (d / "steps.toml").write_text(text.replace('name = "quick"', 'name = "cli-test"'))
     text = builtin_plans()["linear"].read_text()
     text = text.replace("record_s = 8.0", "record_s = 1.0").replace(
-        "average_records = 8", "average_records = 3"
+        "average_records = 64", "average_records = 3"
     )
     (d / "random.toml").write_text(text.replace("noise_s = 2.0", "noise_s = 0.5"))
     return d

@@ -209,3 +209,36 @@ def test_command_chain_writes_model_results_and_report(run, tmp_path):
     assert m.parameters["gap"].nominal == load_model().parameters["gap"].nominal
     report = (out / "report.html").read_text()
     assert "Validation" in report and "PASS" in report
+
+
+def test_steps_not_converged_under_force_control_are_left_out(run, calibrated, tmp_path):
+    """A step the controller did not settle (force off target, response possibly still in a
+    transient) is marked in the file; calibration, cross-validation and validation leave it
+    out unless asked. Here the worst case: one 8 N step near the resonance with its response
+    doubled. Left out, the validation is that of the clean file; included, it fails."""
+    import shutil
+
+    import h5py
+
+    from analysis.calibration.nonlinear import fitted_rows
+
+    model, data = run
+    path = tmp_path / "one-unsettled-step.h5"
+    shutil.copy(data.path, path)
+    row = int(np.flatnonzero((data.levels_n[data.level_index] == 8.0)
+                             & np.isclose(data.frequency_hz, 26.0))[0])  # fmt: skip
+    with h5py.File(path, "r+") as f:
+        f["steps/response"][row] = 2.0 * f["steps/response"][row]
+        f["steps/control_converged"][row] = False
+    bad = read_measurement(path)
+    st = calibrated.settings
+    assert row not in fitted_rows(bad, [8.0], st)
+    every = fitted_rows(bad, [8.0], CalibrationSettings(include_unconverged=True))
+    assert row in every and every.size == fitted_rows(data, [8.0], st).size
+    clean = validate(model, data, calibrated)
+    left_out = validate(model, bad, calibrated)
+    assert left_out.passed and left_out.chi2_per_dof < clean.chi2_per_dof * 1.1
+    included = calibrated.__class__(
+        **{**calibrated.__dict__, "settings": CalibrationSettings(include_unconverged=True)}
+    )
+    assert not validate(model, bad, included).passed

@@ -1,0 +1,280 @@
+"""Model predictions on the branch the test was on.
+
+Where a nonlinear response is multi-valued (the jump of a hardening or contact resonance), the
+test and a model can sit on different branches at the same frequency: the rig may leave the
+resonant branch a few steps before its fold (a transient, a force-control correction), and a
+model stepped by continuation leaves it only at the fold. Such a step misfits by hundreds of
+standard errors although the model is right, and it dominates any comparison or calibration.
+
+:class:`BranchMatchedPredictor` solves each sweep as the test did (forward continuation) and,
+over the steps that misfit, once more in the reverse order (continuation from the far side,
+which follows the other branch back to its fold); each step then takes the solution closer to
+the measurement. Derivatives are those of the chosen solution, so calibrations stay exact.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from analysis.mhb.sensitivity import point_sensitivities
+from analysis.mhb.sweep import solve_steps
+from analysis.predict import Prediction, SteppedSinePredictor, sweeps_of
+from analysis.system import build_problem_dofs
+
+__all__ = ["BranchMatchedPredictor"]
+
+#: A step whose RMS misfit exceeds this many standard errors, and whose fundamental misses by
+#: more than this share (the other branch of a jump misses by far more than a model error),
+#: is solved from the other side too.
+SUSPECT_SIGMA = 5.0
+SUSPECT_RELATIVE = 0.1
+#: Sub-step halvings tried on a step that fails from its neighbour (the other branch is tried
+#: anyway, from the far side).
+MAX_SUBSTEP_DEPTH = 2
+
+
+class BranchMatchedPredictor(SteppedSinePredictor):
+    """:class:`~analysis.predict.SteppedSinePredictor` that follows the test's branch.
+
+    Parameters are those of :class:`~analysis.predict.SteppedSinePredictor`, plus
+
+    match_branches : bool
+        False gives the plain forward continuation (the test's sweep order only).
+
+    Orders the file records with a zero force target at every level (a test that holds the
+    force's higher harmonics at zero) drive the model with their measured force but are not
+    compared: their FRFs divide by a force at the noise. :attr:`compared` holds the indices of
+    the compared orders; :meth:`measured` and :meth:`predict` return those orders only.
+    """
+
+    def __init__(self, model, data, *, match_branches: bool = True, **kwargs) -> None:
+        super().__init__(model, data, **kwargs)
+        self.match_branches = match_branches
+        targets = np.abs(np.asarray(data.force_targets))
+        excited = np.flatnonzero(targets.max(axis=0) > 0) if targets.size else np.array([], int)
+        self.compared = excited if excited.size else np.arange(len(self.orders))
+        self.compared_orders = [self.orders[k] for k in self.compared]
+        H, s = self.measured()
+        positive = s[np.isfinite(s) & (s > 0)]
+        floor = positive.min() if positive.size else 1.0
+        self._H = H
+        self._sigma = np.maximum(np.nan_to_num(s, nan=floor), floor)
+
+    def measured(self, all_orders: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Measured FRFs and standard errors, shape (n_steps, n_channels, n_compared) (every
+        recorded order with ``all_orders``)."""
+        H, s = super().measured()
+        if all_orders or not hasattr(self, "compared"):
+            return H, s
+        return H[:, :, self.compared], s[:, :, self.compared]
+
+    def _step_relative(self, frf: np.ndarray, row: int) -> float:
+        """Largest relative misfit of the fundamental over the channels."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            e = np.abs(frf[:, 0] - self._H[row, :, 0]) / np.abs(self._H[row, :, 0])
+        return float(np.max(e)) if np.all(np.isfinite(e)) else np.inf
+
+    def _step_misfit(self, frf: np.ndarray, row: int) -> float:
+        z = np.abs((frf - self._H[row]) / self._sigma[row]) ** 2
+        return float(np.sqrt(np.mean(z))) if np.all(np.isfinite(z)) else np.inf
+
+    def problem(self, model, extra_dofs: Sequence[int] = ()):
+        """Balance problem of ``model`` (with the file's sensor masses) for the file's drive.
+
+        Outputs are the compared channels' DOFs followed by ``extra_dofs``.
+        """
+        return build_problem_dofs(
+            model,
+            [self._force_dof],
+            [*self._out_dofs, *extra_dofs],
+            orders=self.orders,
+            n_harmonics=self.settings["n_harmonics"],
+            n_time=self.settings["n_time"],
+            linear=self._linear_model(model),
+        )
+
+    def frf_of(self, row: int, point) -> tuple[np.ndarray, np.ndarray]:
+        """Channel FRFs (C, n_compared) of a solution at step ``row`` and the factor from
+        displacement phasors to them."""
+        d = self.data
+        k = self.compared
+        orders = np.array([float(self.orders[i]) for i in k])
+        wk = 2 * np.pi * d.frequency_hz[row] * orders
+        F = self._force_sign * d.force[row, k]
+        sign = np.array(self._out_sign)[:, None]
+        power = np.array(self._power)[:, None]
+        factor = sign * (1j * wk[None, :]) ** power / F[None, :] * self._force_sign
+        C = len(self._out_dofs)
+        return point.outputs()[k, :C].T * factor, factor
+
+    def solve(self, model=None, extra_dofs: Sequence[int] = (), rows: np.ndarray | None = None):
+        """Solutions of every needed step on the measured branch.
+
+        Parameters
+        ----------
+        model : Model, optional
+            Default: the predictor's model (with the file's sensor masses).
+        extra_dofs : sequence of int
+            Further output DOFs (after the channels').
+        rows : ndarray of int, optional
+            Steps needed: each sweep is followed through those of its steps only (default:
+            every step).
+
+        Returns
+        -------
+        problem : HarmonicProblem
+        points : dict row -> MHBPoint
+        """
+        model = self.model if model is None else model
+        pb = self.problem(model, extra_dofs)
+        d = self.data
+        need = np.ones(d.n_steps, bool) if rows is None else np.isin(np.arange(d.n_steps), rows)
+        out = {}
+        for sweep in sweeps_of(d):
+            if not need[sweep].any():
+                continue
+            sweep = sweep[need[sweep]]  # the needed steps only, in the test's order
+            F = self._force_sign * d.force[sweep][:, :, None]
+            w = 2 * np.pi * d.frequency_hz[sweep]
+            points = solve_steps(pb, w, F, max_substep_depth=MAX_SUBSTEP_DEPTH).points
+            chosen = list(points)
+            fits = np.array(
+                [
+                    self._step_misfit(self.frf_of(r, p)[0], r) if p.converged else np.inf
+                    for r, p in zip(sweep, points, strict=True)
+                ]
+            )
+            rel = np.array(
+                [
+                    self._step_relative(self.frf_of(r, p)[0], r) if p.converged else np.inf
+                    for r, p in zip(sweep, points, strict=True)
+                ]
+            )
+            bad = np.flatnonzero((fits > SUSPECT_SIGMA) & (rel > SUSPECT_RELATIVE))
+            if self.match_branches and bad.size:
+                lo, hi = bad.min(), min(bad.max() + 1, sweep.size - 1)
+                seg = np.arange(hi, lo - 1, -1)
+                X0 = points[hi].X if points[hi].converged and hi > bad.max() else None
+                back = solve_steps(
+                    pb, w[seg], F[seg], X0=X0, max_substep_depth=MAX_SUBSTEP_DEPTH
+                ).points
+                for j, p in zip(seg, back, strict=True):
+                    if p.converged:
+                        fit = self._step_misfit(self.frf_of(sweep[j], p)[0], sweep[j])
+                        if fit < fits[j]:
+                            chosen[j], fits[j] = p, fit
+            out.update(zip(sweep.tolist(), chosen, strict=True))
+        return pb, out
+
+    def response_sigma(self, pb, points: dict) -> np.ndarray:
+        """Standard errors of the FRF residuals with the force's error through the model.
+
+        The model is driven by the measured force, so a force error ``dF`` moves the model's
+        response by ``(dq/dF) dF`` while the measured response does not move: the residual's
+        variance is ``s_R^2 + sum_k |dq/dF_k|^2 s_F,k^2`` over every recorded order ``k``,
+        divided by ``|F|^2`` for an FRF. For a linear structure ``dq/dF`` is the receptance
+        and this is the file's first-order FRF error; near the fold of a resonance the
+        tangent is far larger and the step weighs accordingly less.
+
+        Parameters
+        ----------
+        pb : HarmonicProblem
+        points : dict row -> MHBPoint
+            Solutions (of :meth:`solve`).
+
+        Returns
+        -------
+        ndarray, shape (n_steps, n_channels, n_compared)
+            NaN-free; the file's first-order value where a step did not converge.
+        """
+        from analysis.mhb.solver import _prepare  # noqa: PLC0415
+
+        d = self.data
+        b = pb.basis
+        C = len(self._out_dofs)
+        k_all = pb.order_k
+        idx = self.channel_indices
+        out = self._sigma.copy()
+        sR = d.response_std[:, idx][:, :, self.compared]
+        sF = d.force_std
+        kc = self.compared
+        for row, p in points.items():
+            if not p.converged:
+                continue
+            prep = p.lin.get("prep") or _prepare(pb, p.omega, p.force[k_all])
+            w = prep["w"]
+            Hof = pb.blocks["of"](w)[:, :C, 0]  # (H+1, C)
+            n = pb.n_nl
+            dirs = [(j, h, unit) for j, h in enumerate(k_all) for unit in (1.0, 1j)]
+            dq_all = np.zeros((len(dirs), b.n_harmonics + 1, C), complex)
+            if n:
+                J = np.eye(b.size * n) - prep["G"] @ p.lin["dF"]
+                Hnf = pb.blocks["nf"](w)[:, :, 0]  # (H+1, n)
+                Hon = pb.blocks["on"](w)[:, :C, :]  # (H+1, C, n)
+                rhs = []
+                for _, h, unit in dirs:
+                    e = np.zeros((b.n_harmonics + 1, n), complex)
+                    e[h] = Hnf[h] * unit
+                    rhs.append(b.from_complex(e).ravel())
+                dX = np.linalg.solve(J, np.array(rhs).T)  # (size n, 2K)
+                dFnl = (p.lin["dF"] @ dX).T.reshape(len(dirs), b.size, n)
+                for i, df in enumerate(dFnl):
+                    dq_all[i] = np.einsum("kij,kj->ki", Hon, b.to_complex(df))
+            for i, (_, h, unit) in enumerate(dirs):
+                dq_all[i, h] += Hof[h] * unit
+            # each part of a complex force error has half its variance
+            wgt = np.array([sF[row, j] ** 2 / 2 for j, _, _ in dirs])
+            dq = dq_all[:, k_all[kc], :]  # (2K, n_compared, C)
+            var = np.einsum("i,ikc->ck", wgt, np.abs(dq) ** 2)
+            wk = 2 * np.pi * d.frequency_hz[row] * np.array([float(self.orders[i]) for i in kc])
+            var *= np.abs(wk[None, :] ** np.array(self._power)[:, None]) ** 2
+            F = np.abs(d.force[row, kc])[None, :]
+            sig = np.sqrt(sR[row] ** 2 + var) / F
+            ok = np.isfinite(sig) & (sig > 0)
+            out[row][ok] = sig[ok]
+        return out
+
+    def predict(
+        self,
+        values: Mapping[str, float] | None = None,
+        params: Sequence[str] = (),
+        rows: np.ndarray | None = None,
+    ) -> Prediction:
+        """Model FRFs (and derivatives) on the measured branch; see the base class."""
+        return self.predict_with_sigma(values, params, rows, sigma=False)[0]
+
+    def predict_with_sigma(
+        self,
+        values: Mapping[str, float] | None = None,
+        params: Sequence[str] = (),
+        rows: np.ndarray | None = None,
+        *,
+        sigma: bool = True,
+    ) -> tuple[Prediction, np.ndarray | None]:
+        """:meth:`predict` and, with ``sigma``, the residuals' standard errors of
+        :meth:`response_sigma` at the same solutions."""
+        model = self.model.with_values(values) if values else self.model
+        pb, points = self.solve(model, rows=rows)
+        d = self.data
+        n, C, H = d.n_steps, len(self.channel_indices), len(self.compared)
+        frf = np.full((n, C, H), np.nan + 0j)
+        dfrf = {p: np.full((n, C, H), np.nan + 0j) for p in params}
+        conv = np.zeros(n, dtype=bool)
+        msgs: list[str] = []
+        need = np.ones(n, bool) if rows is None else np.isin(np.arange(n), rows)
+        for row, p in points.items():
+            conv[row] = p.converged
+            if not p.converged:
+                msgs.append(f"step {row} ({d.frequency_hz[row]:.3f} Hz): {p.message}")
+                continue
+            frf[row], factor = self.frf_of(row, p)
+            if params and need[row]:
+                sens = point_sensitivities(pb, p, list(params))
+                for name in params:
+                    dfrf[name][row] = (
+                        sens[name].d_outputs(pb.order_k[self.compared])[:, :C].T * factor
+                    )
+        sig = self.response_sigma(pb, points) if sigma else None
+        return Prediction(frf, dfrf, conv, msgs), sig
