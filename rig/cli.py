@@ -109,6 +109,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--truth", default="reference", help="simulated rig: truth structure")
     sp.add_argument("--seed", type=int, default=1, help="simulated rig: noise seed")
     sp.add_argument("--starts", type=int, default=100, help="Latin hypercube starts")
+    sp.add_argument("--plan", default="paper", help="stepped-sine plan: name or file")
+    sp.add_argument("--linear-plan", default="linear", help="random-test plan: name or file")
+    sp.add_argument("--lock-dir", help="directory of the device locks")
     sp.add_argument("--json", action="store_true", help="print one JSON object")
     sp.set_defaults(func=cmd_workflow)
     add_gui_command(sub)
@@ -125,6 +128,9 @@ def cmd_workflow(args) -> dict:
         seed=args.seed,
         starts=args.starts,
         quiet=args.json,
+        plan=args.plan,
+        linear_plan=args.linear_plan,
+        lock_dir=args.lock_dir,
     )
     return {
         "folder": str(args.out),

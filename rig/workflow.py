@@ -63,12 +63,21 @@ def run_workflow(
     seed: int = 1,
     starts: int = 100,
     quiet: bool = False,
+    plan: str = "paper",
+    linear_plan: str = "linear",
+    lock_dir: str | Path | None = None,
 ) -> dict:
-    """Run the whole paper workflow into folder ``out`` and return its summary."""
+    """Run the whole paper workflow into folder ``out`` and return its summary.
+
+    ``plan`` and ``linear_plan`` name the stepped-sine and random plans (built-in names or
+    plan files); ``lock_dir`` is the device-lock folder of the rig commands.
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     log: list[dict] = []
     sim = ["--truth", truth, "--seed", str(seed)] if backend == "sim" else []
+    if lock_dir is not None:
+        sim += ["--lock-dir", str(lock_dir)]
     lin_run = out / "linear.h5"
     paper_run = out / "paper.h5"
     _stage(
@@ -77,6 +86,7 @@ def run_workflow(
             "-m",
             "rig",
             "linear",
+            str(linear_plan),
             "--backend",
             backend,
             "--out",
@@ -95,20 +105,20 @@ def run_workflow(
         quiet,
     )
     lin_model = out / "linear" / "calibrated_model.toml"
-    plan = _stage(
+    planning = _stage(
         "pretest planning",
         ["-m", "analysis", "plan", "--model", str(lin_model), "--top", "5"],
         log,
         quiet,
     )
-    (out / "planning.json").write_text(json.dumps(plan, indent=1))
+    (out / "planning.json").write_text(json.dumps(planning, indent=1))
     run = _stage(
         "stepped-sine run",
         [
             "-m",
             "rig",
             "run",
-            "paper",
+            str(plan),
             "--backend",
             backend,
             "--out",
@@ -144,7 +154,7 @@ def run_workflow(
     _stage("report", ["-m", "analysis", "report", str(cal_dir)], log, quiet)
     summary = {
         "linear": lin,
-        "planning": plan,
+        "planning": planning,
         "run": run,
         "calibration": cal,
         "crossval": cv,

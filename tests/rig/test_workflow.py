@@ -1,0 +1,54 @@
+"""The main job, ``rig workflow``, end to end on the simulated rig (reduced plans)."""
+
+import json
+
+import pytest
+
+from rig.plans import builtin_plans
+from rig.workflow import run_workflow
+
+TRUTH_GAP_M = 0.60e-3  # the reference truth's gap
+TRUTH_KC = 4.51e5
+
+
+@pytest.fixture(scope="module")
+def workflow(tmp_path_factory):
+    d = tmp_path_factory.mktemp("workflow")
+    # the random test with fewer averages (40 of 64), the 'quick' stepped-sine plan (2 and 8 N)
+    text = builtin_plans()["linear"].read_text()
+    assert "average_records = 64" in text
+    plan = d / "random.toml"
+    plan.write_text(text.replace("average_records = 64", "average_records = 40"))
+    out = d / "out"
+    summary = run_workflow(out, plan="quick", linear_plan=str(plan), starts=6, quiet=True,
+                           lock_dir=d / "locks")  # fmt: skip
+    return out, summary
+
+
+def test_every_stage_writes_its_files(workflow):
+    out, summary = workflow
+    for name in ("linear.h5", "paper.h5", "linear/calibrated_model.toml", "planning.json",
+                 "nonlinear/calibration.json", "nonlinear/crossval.json",
+                 "nonlinear/validation.json", "nonlinear/report.html", "summary.md",
+                 "workflow.json"):  # fmt: skip
+        assert (out / name).is_file(), name
+    stages = [s["stage"] for s in json.loads((out / "workflow.json").read_text())["stages"]]
+    assert stages == ["random test", "linear calibration", "pretest planning",
+                      "stepped-sine run", "nonlinear calibration", "cross-validation",
+                      "validation", "report"]  # fmt: skip
+    md = (out / "summary.md").read_text()
+    headings = ("Linear calibration (Table 2)", "Pretest planning (Table 4)",
+                "Nonlinear calibration (Table 5)", "Cross-validation", "Validation")  # fmt: skip
+    for heading in headings:
+        assert f"## {heading}" in md
+
+
+def test_the_calibrated_contact_is_near_the_truth(workflow):
+    """From one calibration level (2 N) and 6 starts: gap within 5 %, k_c within 15 %."""
+    _, summary = workflow
+    p = summary["calibration"]["parameters"]
+    assert abs(p["gap"] / TRUTH_GAP_M - 1) < 0.05
+    assert abs(p["k_c"] / TRUTH_KC - 1) < 0.15
+    assert summary["validation"]["level_n"] == 8.0
+    ratios = summary["crossval"]["std_ratio"]
+    assert len(ratios) == 3 and all(r > 0 for r in ratios)  # the folds moved
