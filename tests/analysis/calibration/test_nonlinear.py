@@ -228,7 +228,9 @@ def test_steps_not_converged_under_force_control_are_left_out(run, calibrated, t
     row = int(np.flatnonzero((data.levels_n[data.level_index] == 8.0)
                              & np.isclose(data.frequency_hz, 26.0))[0])  # fmt: skip
     with h5py.File(path, "r+") as f:
-        f["steps/response"][row] = 2.0 * f["steps/response"][row]
+        response = f["steps/response"][row]
+        response[1:] *= 2.0  # the motion channels (channel 0 is the drive force)
+        f["steps/response"][row] = response
         f["steps/control_converged"][row] = False
     bad = read_measurement(path)
     st = calibrated.settings
