@@ -1,7 +1,7 @@
 """Fixtures of the GUI tests: offscreen Qt, a recorded run, a model file, screenshots.
 
 The tests drive the real windows with pytest-qt on the simulated rig (the ``quick`` plan at a
-reduced sample rate) and save the screenshots the README shows into ``docs/screenshots``.
+reduced sample rate) and save screenshots (see ``gui_helpers.SCREENSHOTS``).
 """
 
 from __future__ import annotations

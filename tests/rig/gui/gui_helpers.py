@@ -1,14 +1,23 @@
-"""Helpers of the GUI tests: screenshots into docs/screenshots, the window on a test lock."""
+"""Helpers of the GUI tests: screenshots, the window on a test lock.
+
+Screenshots go to a temporary folder; ``CLEARANCE_RIG_SCREENSHOTS=docs/screenshots pytest
+tests/rig/gui`` refreshes the ones the README shows.
+"""
 
 from __future__ import annotations
 
+import os
+import tempfile
 from pathlib import Path
 
-SCREENSHOTS = Path(__file__).resolve().parents[3] / "docs" / "screenshots"
+SCREENSHOTS = Path(
+    os.environ.get("CLEARANCE_RIG_SCREENSHOTS")
+    or Path(tempfile.gettempdir()) / "clearance-rig-screenshots"
+)
 
 
 def screenshot(widget, name: str, size: tuple[int, int] | None = None) -> Path:
-    """Save ``widget`` as ``docs/screenshots/<name>`` and check the file."""
+    """Save ``widget`` as ``<SCREENSHOTS>/<name>`` and check the file."""
     if size is not None:
         widget.resize(*size)
     SCREENSHOTS.mkdir(parents=True, exist_ok=True)
