@@ -26,11 +26,19 @@ from fractions import Fraction
 
 import numpy as np
 
-from rig.commands import Acquire, Measurement, RunContext, SetDrive
+from rig.commands import Acquire, Measurement, Notify, RunContext, SetDrive
 from rig.control.force_controller import loop_check_gain
-from rig.plans import PretestSettings
+from rig.events import PretestFinished
+from rig.plans import PretestSettings, SteppedSinePlan
 
-__all__ = ["ChannelCheck", "PretestReport", "band_rms", "check_random_response", "stepped_pretest"]
+__all__ = [
+    "ChannelCheck",
+    "PretestReport",
+    "band_rms",
+    "check_random_response",
+    "pretest_procedure",
+    "stepped_pretest",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -302,3 +310,17 @@ def band_rms(x: np.ndarray, fs: float, band_hz: tuple[float, float]) -> np.ndarr
     f = np.fft.rfftfreq(n, 1.0 / fs)
     keep = (f >= band_hz[0]) & (f <= band_hz[1])
     return np.sqrt(2.0 * np.sum(np.abs(spectrum[keep]) ** 2, axis=0)) / n
+
+
+def pretest_procedure(plan: SteppedSinePlan):
+    """The pretest of a stepped-sine plan alone: noise floor, loop check, channel checks, at the
+    frequency the plan's run would use (:func:`rig.pretest.stepped_pretest`)."""
+
+    def procedure(ctx):
+        f0 = plan.pretest.loop_check_frequency_hz or plan.steps()[0].frequency_hz
+        report = yield from stepped_pretest(
+            plan.pretest, ctx, plan.excitation.orders, f0, plan.acquisition.ramp_s
+        )
+        yield Notify(PretestFinished(report))
+
+    return procedure

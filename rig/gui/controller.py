@@ -25,12 +25,11 @@ from typing import Any
 
 from PySide6 import QtCore
 
-from rig.commands import Notify
 from rig.engine import RunEngine
-from rig.events import Event, PretestFinished
+from rig.events import Event
 from rig.gui.sample_tap import SampleTap, TappedBackend, TimeTraces
-from rig.plans import Plan, SteppedSinePlan
-from rig.pretest import stepped_pretest
+from rig.plans import Plan
+from rig.pretest import pretest_procedure
 from rig.setup import LabSetup
 
 __all__ = [
@@ -38,7 +37,6 @@ __all__ = [
     "RunController",
     "RunEnd",
     "RunRequest",
-    "pretest_procedure",
 ]
 
 logger = logging.getLogger(__name__)
@@ -107,20 +105,6 @@ class RunEnd:
     path: Path | None = None
     lines: tuple[str, ...] = ()
     started: bool = True
-
-
-def pretest_procedure(plan: SteppedSinePlan):
-    """The pretest of a stepped-sine plan alone: noise floor, loop check, channel checks, at the
-    frequency the plan's run would use (:func:`rig.pretest.stepped_pretest`)."""
-
-    def procedure(ctx):
-        f0 = plan.pretest.loop_check_frequency_hz or plan.steps()[0].frequency_hz
-        report = yield from stepped_pretest(
-            plan.pretest, ctx, plan.excitation.orders, f0, plan.acquisition.ramp_s
-        )
-        yield Notify(PretestFinished(report))
-
-    return procedure
 
 
 class RunController(QtCore.QObject):
