@@ -3,142 +3,33 @@
 The service owns the rig (its backend, lab setup and amplifier); the GUI submits the plan,
 follows the run's event stream in a worker thread and asks for pause, resume and abort
 (:class:`rig.service.client.ServiceClient`). The stream's events are JSON
-(:mod:`rig.service.codec`); :func:`decode_event` turns them back into the event classes of
-:mod:`rig.events` (complex phasors from ``[re, im]`` pairs, NaN from ``null``), so the window
-draws a run on the service exactly as one in this process. The service does not stream
-samples, run a pretest alone or report its amplifier here: those views say so.
+(:mod:`rig.service.codec`); :func:`~rig.service.codec.decode_event` turns them back into the
+event classes of :mod:`rig.events` (complex phasors from ``[re, im]`` pairs, NaN from
+``null``), so the window draws a run on the service exactly as one in this process. The
+service does not stream samples, run a pretest alone or report its amplifier here: those views
+say so.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import threading
 from pathlib import Path
-from types import SimpleNamespace
-from typing import Any
 
-import numpy as np
 from PySide6 import QtCore
 
 from rig.events import (
-    ControlIteration,
-    Event,
-    FaultRaised,
-    PretestFinished,
-    RecordAcquired,
-    RunFinished,
-    RunPaused,
-    RunResumed,
-    RunStarted,
     RunWarning,
-    StepFinished,
-    StepStarted,
 )
 from rig.gui.controller import RunController, RunEnd, RunRequest
-from rig.plans import PlannedStep
-from rig.pretest import ChannelCheck, PretestReport
 from rig.service.client import ServiceClient, ServiceError
+from rig.service.codec import decode_event
 
-__all__ = ["ServiceRunController", "decode_event"]
+__all__ = ["ServiceRunController"]
 
 logger = logging.getLogger(__name__)
 
-_COMPLEX = ("force", "response", "drive", "drive_v", "force_n", "gain_n_per_v")
-_REAL = ("force_std", "response_std", "force_std_n")
 _SUMMARY = ("path", "n_done", "n_planned", "converged_fraction", "wall_s", "rig_time_s")
-
-
-def _number(x: Any) -> float:
-    return math.nan if x is None else float(x)
-
-
-def _complex(x: Any) -> np.ndarray:
-    """Nested lists ending in ``[re, im]`` pairs -> complex array (``null`` -> NaN)."""
-    a = np.array(x, dtype=float)
-    return a[..., 0] + 1j * a[..., 1]
-
-
-def _fields(d: dict[str, Any]) -> dict[str, Any]:
-    out = {}
-    for k, v in d.items():
-        if k in _COMPLEX and v is not None:
-            out[k] = _complex(v)
-        elif k in _REAL and v is not None:
-            out[k] = np.array(v, dtype=float)
-        else:
-            out[k] = v
-    return out
-
-
-def _pretest(d: dict[str, Any]) -> PretestReport:
-    channels = tuple(
-        ChannelCheck(
-            c["name"],
-            int(c["point"]),
-            c["status"],
-            _number(c["noise_rms"]),
-            _number(c["response"]),
-            _number(c["snr"]),
-            c.get("message", ""),
-        )
-        for c in d.get("channels", [])
-    )
-    gain = d.get("gain_n_per_v")
-    return PretestReport(
-        _number(d.get("frequency_hz")),
-        channels,
-        _complex(d["drive_v"]) if d.get("drive_v") else np.zeros(0, complex),
-        _complex(d["force_n"]) if d.get("force_n") else np.zeros(0, complex),
-        None if gain is None else _complex(gain),
-    )
-
-
-def decode_event(obj: dict[str, Any]) -> Event | None:
-    """The :mod:`rig.events` object of one event of the stream (None for the service's own
-    ``RunState`` and for types this GUI does not draw)."""
-    kind, d = obj.get("type"), obj.get("data", {})
-    t = {"time_s": _number(obj.get("time_s"))}
-    if kind == "RunStarted":
-        return RunStarted(d["plan_name"], d["kind"], d["n_steps"], d["n_done"], d["path"], **t)
-    if kind == "PretestFinished":
-        return PretestFinished(_pretest(d["report"]), **t)
-    if kind == "StepStarted":
-        return StepStarted(PlannedStep(**d["step"]), d["n_steps"], **t)
-    if kind == "ControlIteration":
-        f = _fields(d)
-        return ControlIteration(
-            f["plan_index"],
-            f["iteration"],
-            f["status"],
-            f["accepted"],
-            _number(f["error"]),
-            _number(f["frequency_hz"]),
-            f["drive_v"],
-            f["force_n"],
-            f["force_std_n"],
-            **t,
-        )
-    if kind == "StepFinished":
-        record = SimpleNamespace(**_fields(d["record"]))
-        record.control_error = _number(record.control_error)
-        names = tuple(d["channel_names"])
-        return StepFinished(record, None, names, d["n_done"], d["n_steps"], d["settled"], **t)
-    if kind == "RecordAcquired":
-        return RecordAcquired(d["index"], d["n_records"], d["purpose"], **t)
-    if kind == "RunWarning":
-        return RunWarning(d["kind"], d["message"], d.get("channel", ""), **t)
-    if kind == "FaultRaised":
-        return FaultRaised(
-            d["kind"], d["message"], d.get("channel", ""), bool(d.get("paused")), **t
-        )
-    if kind == "RunPaused":
-        return RunPaused(d.get("reason", ""), **t)
-    if kind == "RunResumed":
-        return RunResumed(**t)
-    if kind == "RunFinished":
-        return RunFinished(d["status"], d.get("message", ""), **t)
-    return None
 
 
 class ServiceRunController(RunController):

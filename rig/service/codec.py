@@ -1,4 +1,5 @@
-"""Events as JSON: one encoder for the frozen dataclasses of :mod:`rig.events`.
+"""Events as JSON: one encoder for the frozen dataclasses of :mod:`rig.events`, and the decoder
+clients use to turn the stream back into them (:func:`decode_event`).
 
 An event becomes ``{"seq", "run", "type", "time_s", "data"}``: ``type`` is its class name,
 ``data`` its other fields, converted recursively:
@@ -23,11 +24,29 @@ import math
 from collections.abc import Mapping
 from fractions import Fraction
 from os import PathLike
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
-__all__ = ["encode_event", "event_line", "to_jsonable"]
+from rig.events import (
+    ControlIteration,
+    Event,
+    FaultRaised,
+    PretestFinished,
+    RecordAcquired,
+    RunFinished,
+    RunPaused,
+    RunResumed,
+    RunStarted,
+    RunWarning,
+    StepFinished,
+    StepStarted,
+)
+from rig.plans import PlannedStep
+from rig.pretest import ChannelCheck, PretestReport
+
+__all__ = ["decode_event", "encode_event", "event_line", "to_jsonable"]
 
 
 def _number(x: float) -> float | None:
@@ -116,3 +135,100 @@ def encode_event(event: Any, run_id: str, seq: int) -> dict[str, Any]:
 def event_line(obj: Mapping[str, Any]) -> bytes:
     """One line of the event stream: compact strict JSON and a newline."""
     return (json.dumps(obj, separators=(",", ":"), allow_nan=False) + "\n").encode("utf-8")
+
+
+# -- decoding (clients) ----------------------------------------------------------------------
+_COMPLEX = ("force", "response", "drive", "drive_v", "force_n", "gain_n_per_v")
+_REAL = ("force_std", "response_std", "force_std_n")
+
+
+def _float(x: Any) -> float:
+    return math.nan if x is None else float(x)
+
+
+def _complex(x: Any) -> np.ndarray:
+    """Nested lists ending in ``[re, im]`` pairs -> complex array (``null`` -> NaN)."""
+    a = np.array(x, dtype=float)
+    return a[..., 0] + 1j * a[..., 1]
+
+
+def _fields(d: dict[str, Any]) -> dict[str, Any]:
+    out = {}
+    for k, v in d.items():
+        if k in _COMPLEX and v is not None:
+            out[k] = _complex(v)
+        elif k in _REAL and v is not None:
+            out[k] = np.array(v, dtype=float)
+        else:
+            out[k] = v
+    return out
+
+
+def _pretest(d: dict[str, Any]) -> PretestReport:
+    channels = tuple(
+        ChannelCheck(
+            c["name"],
+            int(c["point"]),
+            c["status"],
+            _float(c["noise_rms"]),
+            _float(c["response"]),
+            _float(c["snr"]),
+            c.get("message", ""),
+        )
+        for c in d.get("channels", [])
+    )
+    gain = d.get("gain_n_per_v")
+    return PretestReport(
+        _float(d.get("frequency_hz")),
+        channels,
+        _complex(d["drive_v"]) if d.get("drive_v") else np.zeros(0, complex),
+        _complex(d["force_n"]) if d.get("force_n") else np.zeros(0, complex),
+        None if gain is None else _complex(gain),
+    )
+
+
+def decode_event(obj: dict[str, Any]) -> Event | None:
+    """The :mod:`rig.events` object of one event of the stream (None for the service's own
+    ``RunState`` and for types this GUI does not draw)."""
+    kind, d = obj.get("type"), obj.get("data", {})
+    t = {"time_s": _float(obj.get("time_s"))}
+    if kind == "RunStarted":
+        return RunStarted(d["plan_name"], d["kind"], d["n_steps"], d["n_done"], d["path"], **t)
+    if kind == "PretestFinished":
+        return PretestFinished(_pretest(d["report"]), **t)
+    if kind == "StepStarted":
+        return StepStarted(PlannedStep(**d["step"]), d["n_steps"], **t)
+    if kind == "ControlIteration":
+        f = _fields(d)
+        return ControlIteration(
+            f["plan_index"],
+            f["iteration"],
+            f["status"],
+            f["accepted"],
+            _float(f["error"]),
+            _float(f["frequency_hz"]),
+            f["drive_v"],
+            f["force_n"],
+            f["force_std_n"],
+            **t,
+        )
+    if kind == "StepFinished":
+        record = SimpleNamespace(**_fields(d["record"]))
+        record.control_error = _float(record.control_error)
+        names = tuple(d["channel_names"])
+        return StepFinished(record, None, names, d["n_done"], d["n_steps"], d["settled"], **t)
+    if kind == "RecordAcquired":
+        return RecordAcquired(d["index"], d["n_records"], d["purpose"], **t)
+    if kind == "RunWarning":
+        return RunWarning(d["kind"], d["message"], d.get("channel", ""), **t)
+    if kind == "FaultRaised":
+        return FaultRaised(
+            d["kind"], d["message"], d.get("channel", ""), bool(d.get("paused")), **t
+        )
+    if kind == "RunPaused":
+        return RunPaused(d.get("reason", ""), **t)
+    if kind == "RunResumed":
+        return RunResumed(**t)
+    if kind == "RunFinished":
+        return RunFinished(d["status"], d.get("message", ""), **t)
+    return None

@@ -11,8 +11,8 @@ from PySide6 import QtCore
 
 from analysis.measurement_file import read_measurement
 from rig.gui.app import LabWindow
-from rig.gui.service_controller import ServiceRunController, decode_event
-from rig.service.codec import encode_event
+from rig.gui.service_controller import ServiceRunController
+from rig.service.codec import decode_event, encode_event
 from tests.rig.service.conftest import Procs, ServiceProcess, bench  # noqa: F401
 
 RUN_MS = 90_000
