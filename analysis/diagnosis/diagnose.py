@@ -16,10 +16,15 @@
    (:mod:`analysis.diagnosis.screen`), ranked by BIC.
 4. **Verify** a short list in the full model (:mod:`analysis.diagnosis.verify`): the best
    distinct laws of the screen (the best one also at its second location: neighbours tie in
-   a screen) and the linear candidates that earn their parameter on the linear test; each
-   recalibrated by Levenberg-Marquardt from the screen's (or the linear test's) values. Only
-   if none reaches the noise: the next laws, the best of each law family the evidence points
-   at, and further starts for the best two.
+   a screen), the linear candidates that earn their parameter on the linear test, and the
+   best picks at unmeasured locations (a group of springs, a joint); each recalibrated by
+   Levenberg-Marquardt from the screen's (or the linear test's) values, at most ``workers``
+   at a time. The picks at unmeasured locations are dropped once a verified candidate
+   is at the noise or the stage has used ``time_budget_s`` of processor time. Only if
+   none explains it and processor time is left: the fits stopped for time go on, then the
+   next laws, the best of each law family the evidence points at, and further starts for
+   the best two. Every limit is processor time, so a diagnosis does the same work however
+   busy the machine is.
 5. **Rank** the verified candidates by BIC on the same steps against the recalibrated model;
    candidates within ``tie_bic`` of the best form a group (the simplest law first). The effect
    is *explained* when the best brings the residual to ``explained_rms`` of the noise;
@@ -35,6 +40,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, wait
 from pathlib import Path
 
 import numpy as np
@@ -72,6 +78,35 @@ def _linear_steps(pred: BranchMatchedPredictor) -> np.ndarray:
     return out
 
 
+def _run_verifications(ex, jobs: list[VerifyJob], essential: int, enough, workers: int) -> dict:
+    """Run verification jobs (on ``ex``, at most ``workers`` at a time, or in this process)
+    in order; once ``enough`` of the results so far holds, the jobs after the first
+    ``essential`` not yet started are dropped. Returns ``{index: Verified}`` of the jobs run,
+    in job order."""
+    out: dict[int, Verified] = {}
+    if ex is None:
+        for i, job in enumerate(jobs):
+            if i >= essential and enough(list(out.values())):
+                break
+            out[i] = run_verify(job)
+        return out
+    running: dict = {}
+    queue = list(enumerate(jobs))
+    while queue or running:
+        while queue and len(running) < workers:
+            i, job = queue.pop(0)
+            if i >= essential and enough(list(out.values())):
+                queue.clear()
+                break
+            running[ex.submit(run_verify, job)] = i
+        if not running:
+            break
+        finished, _ = wait(running, return_when=FIRST_COMPLETED)
+        for f in finished:
+            out[running.pop(f)] = f.result()
+    return dict(sorted(out.items()))
+
+
 class _Later:
     """A job's result: from an executor's future, or computed in this process on demand."""
 
@@ -83,6 +118,10 @@ class _Later:
         if self._future is not None:
             return self._future.result()
         return self._fn(self._job)
+
+
+def _best_rms(done: list[Verified]) -> float:
+    return min((v.rms_over_noise() for v in done), default=math.inf)
 
 
 def _law_key(c: Candidate) -> tuple:
@@ -282,22 +321,41 @@ def diagnose(
         t2 = time.perf_counter()
         first, second = _shortlist(screen, fits, evidence, st.n_verify, baseline.bic)
         linear_first = _linear_shortlist(lin_base, lin_fits, st)
-        jobs = [verify_job(f.candidate, f.values, f.known) for f in first]
-        jobs += [verify_job(f.candidate, start_toml=f.model_toml) for f in linear_first]
-        origin: list = [*first, *linear_first]
-        pending = [_Later(ex, run_verify, j) for j in jobs]
-        done = [p.result() for p in pending]
-        say("verified", {"n": len(done), "best_rms": min(v.rms_over_noise() for v in done)})
+        # the best law at its two best locations, the linear test's candidates and the next
+        # law first; the other picks (unmeasured locations) are dropped once a verified
+        # candidate is at the noise or the stage's processor time is spent
+        n_lead = min(2, len(first))
+        origin: list = [*first[:n_lead], *linear_first, *first[n_lead:]]
+        essential = len(origin) - len(first) + min(3, len(first))
+        # a candidate no better than the model recalibrated without it stops early
+        bar = refit.chi2_per_dof()
+        jobs = [dataclasses.replace(
+            verify_job(o.candidate, start_toml=o.model_toml) if isinstance(o, LinearFit)
+            else verify_job(o.candidate, o.values, o.known), give_up_chi2=bar)
+            for o in origin]  # fmt: skip
+
+        def enough(vs: list[Verified]) -> bool:
+            # one at the noise, or the processor time of the stage spent
+            spent = sum(v.cpu_seconds for v in vs)
+            return any(v.rms_over_noise() <= st.adequate_rms for v in vs) or (
+                spent >= st.time_budget_s
+            )
+
+        ran = _run_verifications(ex, jobs, essential, enough, st.workers)
+        origin = [origin[i] for i in ran]
+        done = [v for v in ran.values()]
+        say("verified", {"n": len(done), "best_rms": _best_rms(done)})
 
         def left() -> float:
-            return st.time_budget_s - (time.perf_counter() - t0)
+            # processor time, so what a diagnosis does does not depend on the machine's load
+            return st.time_budget_s - sum(v.cpu_seconds for v in done)
 
         def unexplained() -> bool:
-            return min(v.rms_over_noise() for v in done) > st.explained_rms
+            return _best_rms(done) > st.explained_rms
 
         # a strong effect's fit may need longer than the time a verification has: those
         # stopped for time while still lowering the metric fast go on from where they were
-        if unexplained():
+        if unexplained() and left() > 0:
             going = sorted((i for i, v in enumerate(done) if v.stopped
                             and v.last_decrease() >= st.continue_decrease),
                            key=lambda i: done[i].chi2_per_dof())[:2]  # fmt: skip
@@ -318,9 +376,9 @@ def diagnose(
                     for f in second]  # fmt: skip
             done += [p.result() for p in more]
             origin += second
-            say("verified", {"n": len(done), "best_rms": min(v.rms_over_noise() for v in done)})
+            say("verified", {"n": len(done), "best_rms": _best_rms(done)})
         order = np.argsort([v.chi2_per_dof() for v in done])
-        best_rms = done[order[0]].rms_over_noise()
+        best_rms = done[order[0]].rms_over_noise() if done else math.inf
         # further starts only for a candidate that went most of the way (a local minimum of
         # a strong effect), not for one that explains little
         promising = best_rms <= st.restart_fraction * refit.rms_over_noise()

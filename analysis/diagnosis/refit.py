@@ -160,22 +160,52 @@ class _OutOfTime(Exception):
     """The fit's time is up (raised from the iteration callback)."""
 
 
-def _watch(seen: list, progress, deadline: float | None, h: dict) -> None:
+class _GiveUp(_OutOfTime):
+    """The fit stays worse than the bar it was given (raised from the iteration callback)."""
+
+
+def _watch(seen: list, progress, deadline: float | None, give_up, h: dict) -> None:
     seen.append(h)
     if progress:
         progress("lm", h)
-    if deadline is not None and time.perf_counter() > deadline and h["iteration"] > 0:
+    if deadline is not None and time.process_time() > deadline and h["iteration"] > 0:
         raise _OutOfTime
+    if give_up is not None and h["iteration"] >= 2 and len(seen) >= 2:
+        # two iterations in, still above the bar and no longer falling fast: hopeless
+        bar, dof = give_up
+        if 2 * h["cost"] / dof() > bar and h["cost"] > 0.5 * seen[-2]["cost"]:
+            raise _GiveUp
 
 
-def _stopped(obj: FRFObjective, seen: list[dict]) -> LeastSquaresResult:
-    """The result at the last accepted iterate of a fit stopped for time."""
+class _Remember:
+    """The objective, remembering its residuals at the last point with a Jacobian (the
+    iterate Levenberg-Marquardt accepted last), and stopping the fit once past ``deadline``
+    (an evaluation far from the measurement, with steps that need sub-steps, can take longer
+    than a whole fit near it). Times are this process's processor time."""
+
+    def __init__(self, obj: FRFObjective, deadline: float | None = None) -> None:
+        self.obj, self.x, self.r, self.deadline = obj, None, None, deadline
+
+    def __call__(self, x, want_jac):
+        late = self.deadline is not None and time.process_time() > self.deadline
+        if late and self.x is not None:
+            raise _OutOfTime
+        r, J = self.obj(x, want_jac)
+        if want_jac:
+            self.x, self.r = np.array(x, float), r
+        return r, J
+
+
+def _stopped(
+    fun: _Remember, seen: list[dict], message: str = "stopped: the time allowed is up"
+) -> LeastSquaresResult:
+    """The result at the last accepted iterate of a fit stopped for time (no covariance: a
+    stopped fit's means nothing, and a Jacobian costs a full sensitivity solve)."""
     x = np.array(seen[-1]["x"])
-    r, J = obj(x, True)
-    JTJ = J.T @ J
-    cov = np.linalg.pinv(JTJ)
-    return LeastSquaresResult(x, 0.5 * float(r @ r), r, J, cov, 0, 0, seen[-1]["iteration"],
-                              False, "stopped: the time allowed is up", list(seen))  # fmt: skip
+    r = fun.r if fun.x is not None and np.array_equal(fun.x, x) else fun.obj(x, False)[0]
+    cov = np.full((x.size, x.size), np.nan)
+    return LeastSquaresResult(x, 0.5 * float(r @ r), r, None, cov, 0, 0, seen[-1]["iteration"],
+                              False, message, list(seen))  # fmt: skip
 
 
 def _current(model: Model, name: str) -> float:
@@ -211,6 +241,7 @@ def refit(
     n_time: int = 128,
     progress: Callable[[str, dict], None] | None = None,
     max_seconds: float | None = None,
+    give_up_chi2: float | None = None,
 ) -> Refit:
     """Fit ``parameters`` of ``model`` to the stepped-sine FRFs of ``data``.
 
@@ -238,8 +269,13 @@ def refit(
     progress : callable, optional
         ``progress(stage, info)``: ``"start"`` per start evaluated, ``"lm"`` per iteration.
     max_seconds : float, optional
-        Stop Levenberg-Marquardt after its first iteration past this time (from the call);
-        the last accepted iterate is returned.
+        Processor time allowed to Levenberg-Marquardt (this process's, so a fit does the same
+        work however busy the machine is): it stops at its first evaluation past it and
+        returns the last accepted iterate.
+    give_up_chi2 : float, optional
+        Stop (keeping the last iterate) when, two or more iterations in, the chi-square per
+        degree of freedom is still above this and the last iteration lowered it by less than
+        half: a candidate that does no better than the model without it.
 
     Returns
     -------
@@ -251,6 +287,8 @@ def refit(
     obj = _objective(model, data, names, rows, n_harmonics, n_time)
     base, sigma = obj.predictor.predict_with_sigma(rows=rows)
     good = rows[base.converged[rows]]
+    if not good.size:
+        raise RuntimeError("the start model converges at none of the fitted steps")
     if good.size < rows.size:
         log.info(
             "%d step(s) left out: the start model does not converge there", rows.size - good.size
@@ -268,28 +306,39 @@ def refit(
     lo, hi = space.theta_bounds()
     thetas = np.clip(np.array([space.to_theta(c) for c in candidates]), lo, hi)
     costs = []
-    for i, th in enumerate(thetas):
-        costs.append(obj.cost(th))
-        if progress:
-            progress("start", {"index": i, "n": len(thetas), "cost": costs[-1]})
+    if len(thetas) == 1:
+        costs = [np.nan]  # one start: its metric is Levenberg-Marquardt's first evaluation
+    else:
+        for i, th in enumerate(thetas):
+            costs.append(obj.cost(th))
+            if progress:
+                progress("start", {"index": i, "n": len(thetas), "cost": costs[-1]})
     costs = np.array(costs)
-    if not np.isfinite(costs).any():
+    if len(thetas) > 1 and not np.isfinite(costs).any():
         raise RuntimeError("no start gives a converged model response on the fitted steps")
     best: LeastSquaresResult | None = None
-    deadline = None if max_seconds is None else time.perf_counter() + max_seconds
+    deadline = None if max_seconds is None else time.process_time() + max_seconds
     for k in np.argsort(costs)[:n_lm_starts]:
-        if not np.isfinite(costs[k]):
+        if len(thetas) > 1 and not np.isfinite(costs[k]):
             continue
         seen: list[dict] = []
+        fun = _Remember(obj, deadline)
+        bar = None
+        if give_up_chi2 is not None:
+            bar = (give_up_chi2, lambda fun=fun: max(fun.r.size - space.size, 1))
         try:
             res = least_squares_lm(
-                obj, thetas[k], bounds=(lo, hi), max_iterations=max_iterations, ftol=ftol,
-                callback=functools.partial(_watch, seen, progress, deadline),
+                fun, thetas[k], bounds=(lo, hi), max_iterations=max_iterations, ftol=ftol,
+                callback=functools.partial(_watch, seen, progress, deadline, bar),
             )  # fmt: skip
+        except _GiveUp:
+            res = _stopped(fun, seen, "stopped: no better than the bar it was given")
         except _OutOfTime:
-            res = _stopped(obj, seen)
+            res = _stopped(fun, seen)
         if best is None or res.cost < best.cost:
             best = res
+    if len(thetas) == 1 and best is not None and best.history:
+        costs = np.array([best.history[0]["cost"]])
     m, n = best.fun.size, space.size
     dof = max(m - n, 1)
     values = space.as_dict(space.to_physical(best.x))

@@ -43,7 +43,8 @@ class DiagnosisSettings:
     verify_iterations : int
         Levenberg-Marquardt iterations per verification.
     verify_seconds : float
-        Time allowed for one verification's Levenberg-Marquardt (its last iterate is scored).
+        Processor time allowed for one verification's Levenberg-Marquardt (its last iterate
+        is scored; processor time, so a diagnosis does the same work on a busy machine).
     continue_seconds, continue_decrease : float
         When no candidate explains the misfit, the (at most two) verifications stopped for
         time while their last iteration still lowered the metric by ``continue_decrease`` or
@@ -55,8 +56,8 @@ class DiagnosisSettings:
     n_harmonics, n_time : int
         Balance settings of every prediction.
     time_budget_s : float
-        The second stage of verifications and the further starts begin only before this
-        much time has passed since the diagnosis started.
+        Continued fits, the second stage of verifications and the further starts begin only
+        while the verifications so far have used less than this much processor time.
     restart_fraction : float
         Further starts are tried only for a best candidate that brought the residual of the
         recalibrated model down to this fraction or below (a strong effect stuck in a local
@@ -78,7 +79,7 @@ class DiagnosisSettings:
     workers: int = 2
     n_harmonics: int = 9
     n_time: int = 128
-    time_budget_s: float = 45.0
+    time_budget_s: float = 40.0
     restart_fraction: float = 0.2
 
     def __post_init__(self) -> None:

@@ -613,7 +613,7 @@ class Screen:
             parts.append(("cand", cand.law, B_loc, values))
         return parts
 
-    def _law_eval(self, fr, law_or_element, X_inc, theta, want_basis):
+    def _law_eval(self, fr, law_or_element, X_inc, theta, want_basis, want_jac=True):
         """Forces (n, H+1, m) at incidence phasors X_inc, their order Jacobian (n, m, 2K, 2K)
         and, with ``want_basis``, the force of each linear parameter at unit value."""
         bs = self._basis
@@ -649,14 +649,16 @@ class Screen:
             return self._exact_aft(fr, element, X_inc, linear if want_basis else None)
         ev = element.evaluate(u, v, want_basis)
         f = bs.phasors(ev.f)
-        dfdv = ev.df_dv * (v_scale if v_scale is not None else 1.0)
-        du = np.moveaxis(ev.df_du, 1, 2)[:, :, None, :]  # (n, m, 1, T)
-        dv = np.moveaxis(dfdv * fr.omega[:, None, None], 1, 2)[:, :, None, :]
-        Jm = (bs.Po * du) @ bs.Eo + (bs.Po * dv) @ bs.dEo  # (n, m, 2K, 2K)
         basis = None
         if want_basis:
             names = element.param_names
             basis = {p: bs.phasors(ev.df_dp[names.index(p)]) for p in linear}
+        if not want_jac:
+            return f, None, basis
+        dfdv = ev.df_dv * (v_scale if v_scale is not None else 1.0)
+        du = np.moveaxis(ev.df_du, 1, 2)[:, :, None, :]  # (n, m, 1, T)
+        dv = np.moveaxis(dfdv * fr.omega[:, None, None], 1, 2)[:, :, None, :]
+        Jm = (bs.Po * du) @ bs.Eo + (bs.Po * dv) @ bs.dEo  # (n, m, 2K, 2K)
         return f, Jm, basis
 
     def _exact_aft(self, fr, element, X_inc, linear):
@@ -775,15 +777,24 @@ class Screen:
         if law is not None or joint:
             incid.append(("cand", law, B_loc, None))
         # per incidence: response at the sensors to a unit force (real) and state map
-        maps = {}
-        for i, (_, _, rows, _) in enumerate(incid):
-            for j, row in enumerate(rows):
+        maps = st.setdefault("maps", {})
+
+        def state_map(row):
+            # response at the sensors to a unit force at an incidence, and its state map
+            key = row.tobytes()
+            if key not in maps:
                 Rr = np.einsum("nkcd,d->nkc", R_o[:, :, :C, 1:], row)[:, :, :, None]
                 Pr = np.einsum("d,nkdc->nkc", row, st["P"])[:, :, None, :]
-                maps[i, j] = (_realify(Rr), _realify(Pr))
+                maps[key] = (_realify(Rr), _realify(Pr))
+            return maps[key]
+
         rss = np.inf
         its = self.n_iterations if n_iterations is None else n_iterations
         for it in range(its + 1):
+            # at the data's states the candidate's coefficients start at zero, so its force
+            # and Jacobian vanish and the whitening is the model's own elements': computed
+            # once per location, shared by every law there
+            whitened = it == 0 and "S0" in st
             g_total = np.zeros((n, H1, len(fr.dofs)), complex)
             M = np.zeros((n, 2 * K * C, 2 * K * C))
             columns, names, lower = [], [], []
@@ -807,7 +818,8 @@ class Screen:
                     Jm = np.zeros((n, rows.shape[0], 2 * K, 2 * K))
                     if law is not None and law.kind != "joint_spring":
                         th = {p: theta[p] for p in (*law.linear, *law.nonlinear)}
-                        f, Jm, basis = self._law_eval(fr, law, Xi, th, True)
+                        f, Jm_c, basis = self._law_eval(fr, law, Xi, th, True, it > 0)
+                        Jm = Jm if Jm_c is None else Jm_c
                         for p in law.linear:
                             columns.append(np.einsum("nhl,ld->nhd", basis[p], rows))
                             names.append(("cand", p))
@@ -822,32 +834,45 @@ class Screen:
                         names.append(("cand", "k_joint_delta"))
                         lower.append(-np.inf)
                 g_total += np.einsum("nhl,ld->nhd", f, rows)
-                for j in range(rows.shape[0]):
-                    Rr, Pr = maps[i, j]
+                if whitened or (it == 0 and kind_ == "cand"):
+                    continue
+                for j, row in enumerate(rows):
+                    Rr, Pr = state_map(row)
                     M += Rr @ Jm[:, j] @ Pr
             if it > 0 and other.size:
                 # unmeasured harmonics follow the laws: U_h = R_DD(h W) g_h
                 X[:, other] = np.einsum("nhij,nhj->nhi", fr.R[:, other, :, 1:], g_total[:, other])
-            M *= Wr[:, :, None]
-            S = np.linalg.inv(np.eye(2 * K * C)[None] - M)
-            resp = np.einsum("nkij,nkj->nki", R_o[:, :, :C, 1:], g_total[:, bs.order_k])
-            y0 = np.einsum("nij,nj->ni", S, _vec((st["Y"] - drive - resp) * W)).ravel()
-            A = []
-            for col in columns:
-                r = np.einsum("nkij,nkj->nki", R_o[:, :, :C, 1:], col[:, bs.order_k])
-                A.append(np.einsum("nij,nj->ni", S, _vec(r * W)).ravel())
+            if whitened:
+                S = st["S0"]
+            else:
+                M *= Wr[:, :, None]
+                S = np.linalg.inv(np.eye(2 * K * C)[None] - M)
+                if it == 0:
+                    st["S0"] = S
+            # the data's residual and each column's response at the sensors, whitened at once
+            Ro = R_o[:, :, :C, 1:]
+            cols = np.stack([g_total[:, bs.order_k], *(c[:, bs.order_k] for c in columns)], -1)
+            r = np.matmul(Ro, cols) * W[..., None]  # (n, K, C, 1 + columns)
+            r[..., 0] = (st["Y"] - drive) * W - r[..., 0]
             fo = np.concatenate([self._F[self.rows][:, :, None], g_total[:, bs.order_k]], axis=2)
+            extra = []
             for name in params:
                 dR = self._param_derivative(fr, name)  # (n, K, C, 1 + nD)
-                r = np.einsum("nkij,nkj->nki", dR, fo)
-                A.append(np.einsum("nij,nj->ni", S, _vec(r * W)).ravel())
+                extra.append(np.einsum("nkij,nkj->nki", dR, fo) * W)
                 names.append(("param", name))
                 lower.append(-np.inf)
+            if extra:
+                r = np.concatenate([r, np.stack(extra, -1)], axis=-1)
+            q = r.shape[-1]
+            # real coefficients in the order of _vec: (order, cos/sin, channel)
+            V = np.stack([r.real, -r.imag], axis=2).reshape(n, 2 * K * C, q)
+            Z = np.matmul(S, V)
+            y0 = Z[:, :, 0].ravel()
             cur = np.array(
                 [known[nm] if kd == "known" else theta.get(nm, 0.0) if kd == "cand" else 0.0
                  for kd, nm in names]
             )  # fmt: skip
-            Am = np.column_stack(A) if A else np.zeros((y0.size, 0))
+            Am = Z[:, :, 1:].reshape(n * 2 * K * C, q - 1)
             x, rss = _bounded_lsq(Am, y0 + Am @ cur, np.array(lower, float))
             for (kd, nm), v in zip(names, x, strict=True):
                 if kd == "known":

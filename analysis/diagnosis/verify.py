@@ -70,7 +70,12 @@ class VerifyJob:
     n_harmonics, n_time : int
         Balance settings.
     max_seconds : float or None
-        Time allowed for the recalibration (the last accepted iterate is kept).
+        Processor time allowed for the recalibration's Levenberg-Marquardt (the last accepted
+        iterate is kept).
+    give_up_chi2 : float or None
+        The recalibration stops early when it stays above this chi-square per degree of
+        freedom (the model recalibrated without the candidate):
+        :func:`~analysis.diagnosis.refit.refit`'s ``give_up_chi2``.
     """
 
     model_toml: str
@@ -88,6 +93,7 @@ class VerifyJob:
     n_harmonics: int = 9
     n_time: int = 128
     max_seconds: float | None = None
+    give_up_chi2: float | None = None
 
 
 @dataclass
@@ -110,7 +116,10 @@ class Verified:
     linear : dict or None
         The linear recalibration (parameters, metric) of a linear candidate.
     seconds : float
+        Wall time.
     message : str
+    cpu_seconds : float
+        Processor time of the verification (its process's).
     """
 
     candidate: Candidate | None
@@ -122,6 +131,7 @@ class Verified:
     linear: dict | None = None
     seconds: float = 0.0
     message: str = ""
+    cpu_seconds: float = 0.0
 
     @property
     def failed(self) -> bool:
@@ -200,13 +210,16 @@ def run_verify(job: VerifyJob) -> Verified:
     """Add the candidate, recalibrate, and score the result on the whole file (top level,
     so executors can run it)."""
     t0 = time.perf_counter()
+    c0 = time.process_time()
     try:
-        return _verify(job, t0)
+        v = _verify(job, t0)
     except Exception as exc:  # a worker must return, whatever the candidate does
         label = "the model" if job.candidate is None else job.candidate.label
         log.warning("verification of %s failed: %s", label, exc)
-        return Verified(job.candidate, {}, np.full(0, np.nan), 1, "", message=str(exc),
-                        seconds=time.perf_counter() - t0)  # fmt: skip
+        v = Verified(job.candidate, {}, np.full(0, np.nan), 1, "", message=str(exc),
+                     seconds=time.perf_counter() - t0)  # fmt: skip
+    v.cpu_seconds = time.process_time() - c0
+    return v
 
 
 def _verify(job: VerifyJob, t0: float) -> Verified:
@@ -248,7 +261,7 @@ def _verify(job: VerifyJob, t0: float) -> Verified:
             m2, data, names, rows=rows if rows.size else None, starts=[],
             distributions=dists, n_random_starts=job.n_starts, seed=job.seed,
             max_iterations=job.max_iterations, ftol=1e-4, n_harmonics=job.n_harmonics,
-            n_time=job.n_time, max_seconds=job.max_seconds,
+            n_time=job.n_time, max_seconds=job.max_seconds, give_up_chi2=job.give_up_chi2,
         )  # fmt: skip
         fitted, history, params = r.model, r.history, r.parameters
         message = r.lm.message if r.lm is not None else ""

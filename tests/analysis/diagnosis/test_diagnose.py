@@ -7,10 +7,11 @@ from __future__ import annotations
 import pytest
 
 from analysis.diagnosis import DiagnosisSettings, augment, default_candidates, diagnose
+from tests.analysis.diagnosis.conftest import truth_as_model
 
-# generous time limits: the verifications' outcome must not depend on the machine's load
+# generous limits of processor time: the verifications must converge on the reduced runs
 QUICK = DiagnosisSettings(n_verify=2, n_refine=4, n_starts=0, workers=2, verify_iterations=10,
-                          verify_seconds=120.0)  # fmt: skip
+                          verify_seconds=120.0, time_budget_s=600.0)  # fmt: skip
 
 
 def _subset(model, locations, kinds):
@@ -93,12 +94,13 @@ def test_hardening_mounts_are_placed_at_the_mounts(runs, reference_model, tmp_pa
     assert result.verdict == "explained", result.summary()
     assert result.rank_of("cubic_spring", "mounts") == 1
     k3 = next(v for k, v in result.group[0].verified.parameters.items() if k.startswith("k3"))
-    assert abs(k3 / 1.5e12 - 1) < 0.1
+    truth = truth_as_model("hardening_mounts").parameters["k3_mount"].value
+    assert abs(k3 / truth - 1) < 0.1  # within 10 % of the truth's
     _added(result, reference_model, data, tmp_path)
 
 
 @pytest.mark.slow
-def test_friction_in_the_clamp_is_found_in_the_clamp(runs, reference_model) -> None:
+def test_friction_in_the_clamp_is_found_in_the_clamp(runs, reference_model, tmp_path) -> None:
     data = runs("clamp_friction")
     cands = _subset(reference_model, ("joint clamp rz", "point 5"),
                     ("coulomb_friction", "linear_damper"))  # fmt: skip
@@ -109,9 +111,9 @@ def test_friction_in_the_clamp_is_found_in_the_clamp(runs, reference_model) -> N
     params = best.verified.parameters
     assert abs(params["f_slip_coulomb_friction_joint_clamp_rz"] / 3.0 - 1) < 0.05
     assert abs(params["k_clamp_rz"] / 5e4 - 1) < 0.05
-    # the friction's switch puts harmonics beyond the balance's nine: 1.7 x noise is left
-    # here, 1.5 on the full run; the model without it misfits by about 200 x noise
+    # the model without it misfits by far more than ten times the explained threshold
     assert best.rms_over_noise < 2.0 < result.comparison.rms_over_noise / 10
+    _added(result, reference_model, data, tmp_path)
 
 
 @pytest.mark.slow
