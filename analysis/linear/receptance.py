@@ -152,8 +152,9 @@ class ModalLinearModel:
         rows, cols = list(rows), list(cols)
         phi = self.modes.phi
         R = self._high_flexibility()
-        blk = _ModalBlock(phi[rows], phi[cols], self.modes.omega, self.modes.zeta,
-                          R[np.ix_(rows, cols)].copy())
+        blk = _ModalBlock(
+            phi[rows], phi[cols], self.modes.omega, self.modes.zeta, R[np.ix_(rows, cols)].copy()
+        )
         if self.param_names:
             dlam, dphi = self._mode_sens()
             M = self.M
