@@ -219,6 +219,9 @@ def _summary_markdown(s: dict, truth: str) -> str:
     lines += ["", "## Cross-validation", "", "| parameter | CV std / FIM^-1 std |", "|---|---|"]
     for n, r in zip(cv["names"], cv["std_ratio"], strict=True):
         lines.append(f"| {n} | {r:.2f} |")
+    if cv.get("stuck"):
+        lines += ["", f"Warning: {len(cv['stuck'])} fold(s) could not leave the calibrated "
+                  "optimum; the standard deviations understate the uncertainty."]  # fmt: skip
     v = s["validation"]
     lines += [
         "",

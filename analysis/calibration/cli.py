@@ -145,6 +145,11 @@ def cmd_crossval(args) -> dict:
                 f"  {n:10s} mean {cv.mean[j]:12.5g}  std {cv.std[j]:.3g}  "
                 f"FIM^-1 std {cv.fim_std[j]:.3g}  ratio {cv.std_ratio[j]:.2f}"
             )
+        if cv.stuck:
+            print(
+                f"  warning: {len(cv.stuck)} fold(s) could not leave the calibrated optimum "
+                f"({', '.join(cv.stuck)}): the standard deviations understate the uncertainty"
+            )
     return {**cv.to_json(), "figure": str(fig)}
 
 

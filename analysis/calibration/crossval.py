@@ -14,8 +14,9 @@ B. Efron, C. Stein, "The jackknife estimate of variance", Ann. Statist. 9 (1981)
 from __future__ import annotations
 
 import concurrent.futures as cf
+import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -30,6 +31,8 @@ from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 
 __all__ = ["CrossValidation", "cross_validate"]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -47,6 +50,12 @@ class CrossValidation:
         Jackknife-scaled covariance.
     fim_std : ndarray, shape (n,)
         Standard deviations from the inverse Fisher information of the full calibration.
+    iterations : list of int
+        Accepted Gauss-Newton steps of each fold.
+    stuck : list of str
+        Folds whose Gauss-Newton iteration could not leave the calibrated optimum (no step
+        reduced their cost): their estimates carry no scatter, and the standard deviations
+        understate the uncertainty.
     """
 
     names: tuple[str, ...]
@@ -57,6 +66,7 @@ class CrossValidation:
     fim_std: np.ndarray
     iterations: list[int]
     seconds: float
+    stuck: list[str] = field(default_factory=list)
 
     @property
     def std(self) -> np.ndarray:
@@ -79,13 +89,14 @@ class CrossValidation:
             "std_ratio": self.std_ratio.tolist(),
             "iterations": self.iterations,
             "seconds": self.seconds,
+            "stuck": self.stuck,
         }
 
 
 def _fold(spec: ObjectiveSpec, theta0: np.ndarray, bounds, max_iterations: int):
     obj = spec.build()
     res = least_squares_lm(obj, theta0, bounds=bounds, damped=False, max_iterations=max_iterations)
-    return res.x, res.nit
+    return res.x, len(res.history) - 1
 
 
 def cross_validate(
@@ -143,6 +154,13 @@ def cross_validate(
     else:
         futures = [executor.submit(_fold, s, x0, bounds, max_iterations) for s in specs]
         out = [f.result() for f in futures]
+    stuck = [name for name, (_, accepted) in zip(folds, out, strict=True) if accepted == 0]
+    if stuck:
+        log.warning(
+            "cross-validation: %d of %d folds could not leave the calibrated optimum (%s): "
+            "the standard deviations understate the uncertainty",
+            len(stuck), len(out), ", ".join(stuck[:4]) + (" ..." if len(stuck) > 4 else ""),
+        )  # fmt: skip
     est = np.array([space.to_physical(x) for x, _ in out])
     K = len(est)
     mean = est.mean(axis=0)
@@ -157,4 +175,5 @@ def cross_validate(
         fim_std=np.sqrt(np.diag(calibration.cov)),
         iterations=[it for _, it in out],
         seconds=time.perf_counter() - t0,
+        stuck=stuck,
     )

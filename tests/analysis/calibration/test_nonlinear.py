@@ -244,3 +244,22 @@ def test_steps_not_converged_under_force_control_are_left_out(run, calibrated, t
         **{**calibrated.__dict__, "settings": CalibrationSettings(include_unconverged=True)}
     )
     assert not validate(model, bad, included).passed
+
+
+def test_a_fold_that_cannot_move_is_reported(run, calibrated, monkeypatch):
+    """A fold whose Gauss-Newton iteration takes no step keeps the optimum: it adds no scatter,
+    and the result names it instead of reporting a falsely small std."""
+    import analysis.calibration.crossval as cvm
+
+    original = cvm.least_squares_lm
+
+    def no_step(fun, x0, **kwargs):
+        return original(fun, x0, **{**kwargs, "max_iterations": 0})
+
+    model, data = run
+    moving = cross_validate(model, data, calibrated)
+    assert moving.stuck == [] and min(moving.iterations) >= 1
+    monkeypatch.setattr(cvm, "least_squares_lm", no_step)
+    cv = cross_validate(model, data, calibrated)
+    assert cv.stuck == cv.folds and np.all(cv.std <= 1e-9 * np.abs(cv.mean))  # round-off only
+    assert cv.to_json()["stuck"] == cv.folds
