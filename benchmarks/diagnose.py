@@ -41,7 +41,7 @@ import numpy as np
 
 from analysis.calibration.lhs import paper_distributions
 from analysis.calibration.linear import calibrate_linear
-from analysis.calibration.nonlinear import level_rows
+from analysis.calibration.nonlinear import fitted_rows
 from analysis.diagnosis import DiagnosisSettings, augment, diagnose
 from analysis.linear.modal import modal_analysis
 from analysis.measurement_file import (
@@ -320,8 +320,7 @@ def calibrate_paper_way(stepped: Path, linear: Path, *, n_starts: int = 30, seed
     lin = calibrate_linear(load_model(), linear).model
     data = read_measurement(stepped)
     levels = sorted(float(x) for x in data.levels_n)
-    rows = level_rows(data, levels[:-1] if len(levels) >= 3 else levels)
-    rows = rows[np.asarray(data.control_converged, bool)[rows]]
+    rows = fitted_rows(data, levels[:-1] if len(levels) >= 3 else levels)
     fit = refit(lin, data, ("k_c", "gap", "v_c"), rows=rows,
                 distributions=paper_distributions(lin.parameters["gap"].nominal),
                 n_random_starts=n_starts, seed=seed)  # fmt: skip

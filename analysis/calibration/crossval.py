@@ -124,12 +124,12 @@ def cross_validate(
     pred = make_predictor(model, data, st)
     folds, masks = [], []
     for lv in calibration.calibration_levels_n:
-        rows = fitted_rows(data, [lv], st)
+        rows = fitted_rows(data, [lv], st.include_unconverged)
         for c, name in enumerate(pred.channel_names):
             folds.append(f"{name} @ {lv:g} N")
             masks.append((rows, c))
     base = np.zeros((data.n_steps, len(pred.channel_names)), bool)
-    base[fitted_rows(data, calibration.calibration_levels_n, st)] = True
+    base[fitted_rows(data, calibration.calibration_levels_n, st.include_unconverged)] = True
     specs = []
     for rows, c in masks:
         m = base.copy()

@@ -114,12 +114,12 @@ def level_rows(data: SteppedSineData, levels_n: Sequence[float]) -> np.ndarray:
 
 
 def fitted_rows(
-    data: SteppedSineData, levels_n: Sequence[float], settings: CalibrationSettings
+    data: SteppedSineData, levels_n: Sequence[float], include_unconverged: bool = False
 ) -> np.ndarray:
     """Row indices of the steps at the given levels that a calibration fits: those converged
-    under force control (every step with ``settings.include_unconverged``)."""
+    under force control (every step with ``include_unconverged``)."""
     rows = level_rows(data, levels_n)
-    if settings.include_unconverged:
+    if include_unconverged:
         return rows
     return rows[np.asarray(data.control_converged, bool)[rows]]
 
@@ -327,7 +327,7 @@ def calibrate_nonlinear(
     """
     st = settings or CalibrationSettings()
     cal_levels, val_level = split_levels(data, st)
-    rows = fitted_rows(data, cal_levels, st)
+    rows = fitted_rows(data, cal_levels, st.include_unconverged)
     space = ParameterSpace.from_model(model, st.parameters)
     predictor = make_predictor(model, data, st)
     mask = np.zeros((data.n_steps, len(predictor.channel_indices)), bool)

@@ -92,7 +92,7 @@ def validate(
     if lv is None:
         raise ValueError("no validation level: the file has a single level; name one")
     st = calibration.settings
-    rows = fitted_rows(data, [lv], st)
+    rows = fitted_rows(data, [lv], st.include_unconverged)
     pred = make_predictor(model, data, st)
     names = list(calibration.space.names)
     p = pred.predict(calibration.parameters, names, rows=rows)

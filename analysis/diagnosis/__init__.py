@@ -44,7 +44,6 @@ cli
 """
 
 from analysis.diagnosis.augment import AugmentResult, augment
-from analysis.diagnosis.branches import BranchMatchedPredictor
 from analysis.diagnosis.candidates import Candidate, Law, Location, default_candidates
 from analysis.diagnosis.compare import Block, Comparison, compare
 from analysis.diagnosis.diagnose import diagnose
@@ -53,6 +52,7 @@ from analysis.diagnosis.refit import Refit, refit
 from analysis.diagnosis.result import Diagnosis, DiagnosisSettings, RankedCandidate
 from analysis.diagnosis.screen import Screen, ScreenFit
 from analysis.diagnosis.signatures import Evidence, Finding, find_signatures
+from analysis.predict_branches import BranchMatchedPredictor
 
 __all__ = [
     "AugmentResult",

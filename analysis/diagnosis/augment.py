@@ -28,8 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis.calibration.lhs import Distribution
-from analysis.calibration.nonlinear import level_rows
-from analysis.diagnosis.branches import BranchMatchedPredictor
+from analysis.calibration.nonlinear import fitted_rows
 from analysis.diagnosis.candidates import Candidate
 from analysis.diagnosis.compare import Comparison, compare
 from analysis.diagnosis.refit import refit
@@ -37,6 +36,7 @@ from analysis.diagnosis.screen import Screen
 from analysis.diagnosis.verify import damping_parameters, start_distributions
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
+from analysis.predict_branches import BranchMatchedPredictor
 
 __all__ = ["AugmentResult", "augment"]
 
@@ -207,9 +207,7 @@ def augment(
             p = m2.parameters[n]
             start[n] = float(np.clip(v, p.lower, p.upper))
     m2 = m2.with_values(start)
-    base_rows = np.asarray(data.control_converged, bool) & np.isin(
-        np.arange(data.n_steps), level_rows(data, _calibration_levels(data, validation_level_n))
-    )
+    base_rows = fitted_rows(data, _calibration_levels(data, validation_level_n))
     z = np.abs(before.residual[base_rows]) ** 2
     history: list[dict] = [{"stage": "model", "iteration": 0,
                             "chi2_per_dof": float(np.nanmean(z)), "parameters": {}}]  # fmt: skip
@@ -233,8 +231,7 @@ def augment(
         *damping_parameters(candidate, m2, data),
     ]))  # fmt: skip
     levels = _calibration_levels(data, validation_level_n)
-    rows = level_rows(data, levels)
-    rows = rows[np.asarray(data.control_converged, bool)[rows]]
+    rows = fitted_rows(data, levels)
 
     def report(stage, info):
         if stage == "lm":

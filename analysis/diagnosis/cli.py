@@ -18,13 +18,13 @@ import time
 from pathlib import Path
 
 from analysis.diagnosis.augment import augment
-from analysis.diagnosis.branches import BranchMatchedPredictor
 from analysis.diagnosis.candidates import default_candidates
 from analysis.diagnosis.compare import compare
 from analysis.diagnosis.diagnose import diagnose
 from analysis.diagnosis.result import DiagnosisSettings
 from analysis.measurement_file import SteppedSineData, read_measurement
 from analysis.model import load_model
+from analysis.predict_branches import BranchMatchedPredictor
 
 __all__ = ["add_parsers"]
 

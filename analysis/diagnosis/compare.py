@@ -18,10 +18,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from analysis.diagnosis.branches import BranchMatchedPredictor
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 from analysis.predict import SteppedSinePredictor
+from analysis.predict_branches import BranchMatchedPredictor
 
 __all__ = ["Block", "Comparison", "compare"]
 
@@ -160,13 +160,13 @@ def compare(
     alpha : float
         Family-wise significance of the "fails here" verdicts (Bonferroni over the blocks).
     predictor : SteppedSinePredictor, optional
-        Default: a :class:`~analysis.diagnosis.branches.BranchMatchedPredictor`, whose
+        Default: a :class:`~analysis.predict_branches.BranchMatchedPredictor`, whose
         standard errors carry the force's error through the model.
     sigma : {"file", "model"}
         ``"file"``: the FRFs' standard errors from the file's phasor uncertainties to first
         order, ``|H| sqrt((s_R/|R|)^2 + (s_F/|F|)^2)``; ``"model"``: the force's error carried
         through the model's tangent
-        (:meth:`~analysis.diagnosis.branches.BranchMatchedPredictor.response_sigma`).
+        (:meth:`~analysis.predict_branches.BranchMatchedPredictor.response_sigma`).
     include_unconverged : bool
         Also score the steps the file flags as not converged under force control (by default
         they are left out: their residuals are NaN and :attr:`Comparison.left_out` lists them).

@@ -45,7 +45,6 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.diagnosis.branches import BranchMatchedPredictor
 from analysis.diagnosis.candidates import Candidate, default_candidates
 from analysis.diagnosis.compare import compare
 from analysis.diagnosis.linear_screen import LinearFit, LinearJob, run_linear_job
@@ -62,6 +61,7 @@ from analysis.diagnosis.verify import Verified, VerifyJob, run_verify
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 from analysis.planning.executors import open_executor
+from analysis.predict_branches import BranchMatchedPredictor
 
 __all__ = ["Diagnosis", "DiagnosisSettings", "RankedCandidate", "diagnose"]
 

@@ -1,7 +1,7 @@
 """Recalibration on the measured branch: several starts, then Levenberg-Marquardt.
 
 The calibration machinery of :mod:`analysis.calibration` (parameter scaling, the uncertainty-
-weighted FRF metric, bounded LM) on a :class:`~analysis.diagnosis.branches.BranchMatchedPredictor`,
+weighted FRF metric, bounded LM) on a :class:`~analysis.predict_branches.BranchMatchedPredictor`,
 so a step the test measured on the other branch of a jump does not dominate the metric. Used to
 calibrate a base model the paper's way (Latin hypercube starts) and to recalibrate every
 candidate model of a diagnosis (given starts: the screen's estimate and the current values).
@@ -22,9 +22,9 @@ from analysis.calibration.lhs import Distribution, latin_hypercube
 from analysis.calibration.lm import LeastSquaresResult, least_squares_lm
 from analysis.calibration.objective import FRFObjective
 from analysis.calibration.parameters import ParameterSpace
-from analysis.diagnosis.branches import BranchMatchedPredictor
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
+from analysis.predict_branches import BranchMatchedPredictor
 
 __all__ = ["Refit", "refit"]
 

@@ -50,7 +50,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import lsq_linear, minimize_scalar
 
-from analysis.diagnosis.branches import BranchMatchedPredictor
 from analysis.diagnosis.candidates import (
     Candidate,
     Law,
@@ -63,6 +62,7 @@ from analysis.measurement_file import SteppedSineData
 from analysis.mhb.aft import element_forces
 from analysis.mhb.harmonics import HarmonicBasis
 from analysis.model import Model
+from analysis.predict_branches import BranchMatchedPredictor
 from analysis.system import attachments
 
 __all__ = [

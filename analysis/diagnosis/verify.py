@@ -23,12 +23,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from analysis.calibration.lhs import Distribution, paper_distributions
-from analysis.diagnosis.branches import BranchMatchedPredictor
 from analysis.diagnosis.candidates import Candidate
 from analysis.diagnosis.compare import compare
 from analysis.diagnosis.refit import refit
 from analysis.measurement_file import read_measurement
 from analysis.model import Model
+from analysis.predict_branches import BranchMatchedPredictor
 
 __all__ = ["VerifyJob", "Verified", "band_modes", "damping_parameters", "run_verify",
            "start_distributions"]  # fmt: skip

@@ -154,20 +154,13 @@ def plot_evidence(evidence, path: str | Path, *, title: str = "") -> Path:
     res = found.get("resonance_shift")
     if res is not None and res.values:
         lv = res.values["levels_n"]
-        axes[0].plot(lv, res.values["measured_hz"], "o-", label="measured")
-        axes[0].plot(lv, res.values["model_hz"], "s--", label="model")
-        axes[0].set_xlabel("level [N]")
-        axes[0].set_ylabel("resonance [Hz]")
-        axes[0].legend()
+        _by_level(axes[0], lv, res.values["measured_hz"], res.values["model_hz"], "resonance [Hz]")
     axes[0].set_title("resonance by level", fontsize=9)
     peak = found.get("peak_height")
     if peak is not None and peak.values and res is not None:
         lv = res.values["levels_n"]
-        axes[1].plot(lv, peak.values["measured"], "o-", label="measured")
-        axes[1].plot(lv, peak.values["model"], "s--", label="model")
-        axes[1].set_xlabel("level [N]")
-        axes[1].set_ylabel("peak |H1| / lowest level's")
-        axes[1].legend()
+        _by_level(axes[1], lv, peak.values["measured"], peak.values["model"],
+                  "peak |H1| / lowest level's")  # fmt: skip
     axes[1].set_title("normalised peak height", fontsize=9)
     growth = [f for f in evidence.findings if f.name.startswith("growth")]
     if growth:
@@ -242,3 +235,12 @@ def plot_diagnosis(diagnosis, folder: str | Path) -> list[Path]:
     if diagnosis.ranking:
         out.append(plot_ranking(diagnosis, folder / "ranking.png"))
     return out
+
+
+def _by_level(ax, levels, measured, model, ylabel: str) -> None:
+    """Measured and model values of one evidence quantity against the level."""
+    ax.plot(levels, measured, "o-", label="measured")
+    ax.plot(levels, model, "s--", label="model")
+    ax.set_xlabel("level [N]")
+    ax.set_ylabel(ylabel)
+    ax.legend()

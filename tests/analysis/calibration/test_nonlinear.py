@@ -234,9 +234,9 @@ def test_steps_not_converged_under_force_control_are_left_out(run, calibrated, t
         f["steps/control_converged"][row] = False
     bad = read_measurement(path)
     st = calibrated.settings
-    assert row not in fitted_rows(bad, [8.0], st)
-    every = fitted_rows(bad, [8.0], CalibrationSettings(include_unconverged=True))
-    assert row in every and every.size == fitted_rows(data, [8.0], st).size
+    assert row not in fitted_rows(bad, [8.0], st.include_unconverged)
+    every = fitted_rows(bad, [8.0], include_unconverged=True)
+    assert row in every and every.size == fitted_rows(data, [8.0]).size
     clean = validate(model, data, calibrated)
     left_out = validate(model, bad, calibrated)
     assert left_out.passed and left_out.chi2_per_dof < clean.chi2_per_dof * 1.1
