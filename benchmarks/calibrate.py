@@ -85,6 +85,8 @@ def run(quick: bool = False) -> dict:
         f"linear calibration {linear_s:.1f} s: "
         + ", ".join(f"{k} {100 * v:+.2f} %" for k, v in lin_err.items())
     )
+    for line in lin.identifiability_notes():
+        print(line)
     print(f"planning {planning_s:.1f} s; best: {plan.top[0] if plan.top else None}")
     print(
         f"nonlinear: LHS {cal.timings['lhs_s']:.1f} s, LM {cal.timings['lm_s']:.1f} s "
@@ -107,6 +109,7 @@ def run(quick: bool = False) -> dict:
         "v_rel_err": rel["v_c"],
         "linear_max_rel_err": max(abs(v) for v in lin_err.values()),
         "linear_rel_err": lin_err,
+        "linear_undetermined": lin.undetermined(),
         "cv_std_ratio": [float(x) for x in cv.std_ratio],
         "chi2_per_dof": cal.chi2_per_dof,
         "validation_passed": val.passed,

@@ -171,6 +171,8 @@ def run_workflow(
 
 def _summary_markdown(s: dict, truth: str) -> str:
     lin = s["linear"].get("parameters", {})
+    lin_std = s["linear"].get("std", {})
+    undetermined = s["linear"].get("undetermined", {})
     cal = s["calibration"]["parameters"]
     std = s["calibration"]["std"]
     lines = [
@@ -178,12 +180,21 @@ def _summary_markdown(s: dict, truth: str) -> str:
         "",
         "## Linear calibration (Table 2)",
         "",
-        "| parameter | calibrated | paper (Table 2) |",
-        "|---|---|---|",
+        "| parameter | calibrated | 1 sigma | paper (Table 2) |",
+        "|---|---|---|---|",
     ]
     for k, ref in PAPER_TABLE2.items():
-        v = lin.get(k)
-        lines.append(f"| {k} | {'' if v is None else f'{v:.4g}'} | {ref:.4g} |")
+        v, sd = lin.get(k), lin_std.get(k)
+        lines.append(f"| {k} | {'' if v is None else f'{v:.4g}'} | "
+                     f"{'' if sd is None else f'{sd:.2g}'} | {ref:.4g} |")  # fmt: skip
+    if undetermined:
+        lines += [
+            "",
+            "Not determined by the random test (relative 1 sigma above 5 %): "
+            + ", ".join(f"{k} ({100 * r:.3g} %)" for k, r in undetermined.items())
+            + "; `linear/linear_calibration.json` lists the model modes they act on that the "
+            "test did not identify (`unidentified_modes`).",
+        ]
     top = s["planning"].get("top", [])
     lines += [
         "",

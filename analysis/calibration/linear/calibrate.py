@@ -48,7 +48,7 @@ from analysis.calibration.linear.run_frfs import (
 from analysis.calibration.linear.split import DEFAULT_CALIBRATION_POINTS, split_channels
 from analysis.calibration.lm import LeastSquaresResult, least_squares_lm
 from analysis.calibration.parameters import ParameterSpace
-from analysis.linear.modal import modal_analysis
+from analysis.linear.modal import modal_analysis, mode_sensitivities
 from analysis.measurement_file import RandomData, RunData, read_measurement
 from analysis.model import DampingSpec, Model
 
@@ -275,6 +275,7 @@ def calibrate_linear(
     cov = np.linalg.pinv(sol.jac.T @ sol.jac) * (2 * sol.cost / max(m - n, 1)) * np.outer(D, D)
     model_cal = model_s.with_values(values)
     pairs = _pair_modes(model_cal, fit, rows, band, st.mac_min)
+    unidentified = _unidentified_modes(model_cal, names, pairs, band)
     damping = DampingSpec(
         default_zeta=model.damping.default_zeta,
         per_mode={pr.model_mode: pr.zeta for pr in pairs if pr.model_mode is not None},
@@ -309,6 +310,7 @@ def calibrate_linear(
         source=run_frfs.source,
         timings={"identification_s": t_id - t0, "calibration_s": t_fit - t_id,
                  "validation_s": t_end - t_fit, "total_s": t_end - t0},
+        unidentified_modes=unidentified,
     )  # fmt: skip
 
 
@@ -362,6 +364,26 @@ def _pair_modes(model: Model, fit, rows: list[int], band, mac_min: float):
     return match_modes(
         fit.frequency_hz, fit.zeta, fit.a.T, modes.frequency_hz[:q], modes.phi[rows, :q], mac_min
     )
+
+
+def _unidentified_modes(model: Model, names, pairs, band) -> list[dict[str, Any]]:
+    """The model's modes in ``band`` without a paired test mode, with ``d ln f / d ln p``."""
+    asm = model.assemble()
+    modes = modal_analysis(asm.M, asm.K)
+    paired = {pr.model_mode - 1 for pr in pairs if pr.model_mode is not None}  # 1-based
+    idx = [i for i, f in enumerate(modes.frequency_hz)
+           if band[0] <= f <= band[1] and i not in paired]  # fmt: skip
+    if not idx:
+        return []
+    dlam, _ = mode_sensitivities(asm.M, asm.K, modes, {n: asm.dM[n] for n in names},
+                                 {n: asm.dK[n] for n in names})  # fmt: skip
+    lam = modes.omega**2
+    return [
+        {"model_mode": int(i) + 1, "frequency_hz": float(modes.frequency_hz[i]),
+         "sensitivity": {n: float(0.5 * dlam[n][i] / lam[i] * model.parameters[n].value)
+                         for n in names}}
+        for i in idx
+    ]  # fmt: skip
 
 
 def _without_sensors(bare: Model, loaded: Model, damping: DampingSpec) -> Model:

@@ -119,5 +119,6 @@ def _summary(result, files: dict[str, str]) -> str:
         b, a = v0[key]["validation"], v1[key]["validation"]
         if a is not None:
             lines.append(f"  validation rms log10 deviation ({key}): {b:.4f} -> {a:.4f}")
+    lines += result.identifiability_notes()
     lines += [f"  model:  {files['model']}", f"  result: {files['result']}"]
     return "\n".join(lines)

@@ -60,6 +60,12 @@ class LinearCalibration:
         damping).
     settings : dict
     timings : dict of str to float, s
+    unidentified_modes : list of dict
+        Modes of the calibrated model (with the sensors) inside the band that no test mode was
+        paired with: ``model_mode``, ``frequency_hz`` and ``sensitivity`` (name ->
+        ``d ln f / d ln p`` of each calibrated parameter; ``model_mode`` 1-based as in
+        :class:`~analysis.calibration.linear.mode_matching.ModePair`). The parameters that act
+        mainly on them are what the test leaves undetermined (:meth:`undetermined`).
     """
 
     x: np.ndarray
@@ -88,6 +94,7 @@ class LinearCalibration:
     settings: dict[str, Any]
     source: str = ""
     timings: dict[str, float] = field(default_factory=dict)
+    unidentified_modes: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def std(self) -> dict[str, float]:
@@ -99,6 +106,41 @@ class LinearCalibration:
         """Correlation matrix of the parameters, shape (n, n)."""
         s = np.sqrt(np.diag(self.cov))
         return self.cov / np.maximum(np.outer(s, s), 1e-300)
+
+    def undetermined(self, max_relative_std: float = 0.05) -> dict[str, float]:
+        """Parameters the test does not determine: name -> relative standard deviation, for
+        those above ``max_relative_std`` (default 5 %), largest first."""
+        rel = {n: self.std[n] / abs(self.parameters[n]) for n in self.names if self.parameters[n]}
+        bad = {n: r for n, r in rel.items() if r > max_relative_std}
+        return dict(sorted(bad.items(), key=lambda kv: -kv[1]))
+
+    def identifiability_notes(self, max_relative_std: float = 0.05) -> list[str]:
+        """Plain-language lines on the parameters the test leaves undetermined: their
+        uncertainty, the model modes in the band without a test mode that they act on (the
+        measurement that would determine them) and what to do; empty when all are determined."""
+        bad = self.undetermined(max_relative_std)
+        if not bad:
+            return []
+        lines = [
+            f"  not determined by this test (relative std above {100 * max_relative_std:g} %): "
+            + ", ".join(f"{n} ({100 * r:.3g} %)" for n, r in bad.items())
+        ]
+        for n in bad:
+            acts = sorted(
+                (m for m in self.unidentified_modes if abs(m["sensitivity"].get(n, 0.0)) > 1e-3),
+                key=lambda m: -abs(m["sensitivity"][n]),
+            )
+            if acts:
+                lines.append(
+                    f"    {n} acts on model modes the test did not identify: "
+                    + ", ".join(f"{m['frequency_hz']:.2f} Hz (d ln f / d ln {n} "
+                                f"{m['sensitivity'][n]:+.3f})" for m in acts[:3])
+                )  # fmt: skip
+        lines.append(
+            "    keep them at their nominal values (calibrate the others with --parameters), "
+            "or measure the modes they act on (more response there: level, averages, points)"
+        )
+        return lines
 
     @property
     def damping(self) -> dict[int, float]:
@@ -142,4 +184,6 @@ class LinearCalibration:
             "validation": self.validation,
             "settings": self.settings,
             "timings": self.timings,
+            "undetermined": self.undetermined(),
+            "unidentified_modes": self.unidentified_modes,
         }

@@ -20,10 +20,16 @@ from analysis.calibration.linear import (
     calibrate_linear,
     sensor_masses,
 )
+from analysis.linear.modal import modal_analysis
 from analysis.measurement_file import ChannelInfo, RandomFRF, read_measurement, write_random
 from analysis.model import load_model
 from tests.analysis import measurement_samples as ms
-from tests.analysis.calibration_linear.synthetic import SENSOR_MASS_KG, TRUE_VALUES, TRUE_ZETA
+from tests.analysis.calibration_linear.synthetic import (
+    SENSOR_MASS_KG,
+    TRUE_VALUES,
+    TRUE_ZETA,
+    write_rig_run,
+)
 
 
 def _errors(result) -> dict[str, float]:
@@ -95,6 +101,44 @@ def test_model_file_written_new_and_reloads(clean_result, tmp_path: Path) -> Non
     assert doc["parameters"] == clean_result.parameters
     assert len(doc["identified_modes"]["modes"]) == 7
     assert doc["damping_per_mode"]["5"] == pytest.approx(TRUE_ZETA[5], rel=0.01)
+
+
+def test_a_test_that_determines_everything_says_nothing(noisy_result) -> None:
+    assert noisy_result.undetermined() == {}
+    assert noisy_result.unidentified_modes == []
+    assert noisy_result.identifiability_notes() == []
+
+
+def test_parameters_the_test_leaves_undetermined_are_named(tmp_path: Path) -> None:
+    """4 % damping on the three mount modes (10.8, 11.2 and 15 Hz) merges them into one test
+    mode: rho_corner, which acts mostly on them, is undetermined, and the two model modes
+    without a test partner are reported with d ln f / d ln p, checked here against central
+    differences of the modal analysis (relative step 1e-3: smaller steps meet the round-off
+    of the low mount modes; tolerance 1e-3 absolute)."""
+    zeta = {**TRUE_ZETA, 1: 0.04, 2: 0.04, 3: 0.04}
+    run = write_rig_run(tmp_path / "merged.h5", noise=0.05, seed=3, zeta=zeta)
+    result = calibrate_linear(load_model(), run)
+    bad = result.undetermined()
+    assert "rho_corner" in bad and bad["rho_corner"] > 0.05
+    assert "E_beam" not in bad and "k_mount" not in bad
+    missing = result.unidentified_modes
+    assert [m["model_mode"] for m in missing] == [1, 3]
+    notes = "\n".join(result.identifiability_notes())
+    assert "rho_corner" in notes and f"{missing[1]['frequency_hz']:.2f} Hz" in notes
+    masses = sensor_masses(read_measurement(run))
+    loaded = result.model.add_masses(masses)  # the model the sensitivities are of
+    for name in ("rho_corner", "k_mount"):
+        p = loaded.parameters[name].value
+        f = []
+        for step in (1e-3, -1e-3):
+            asm = loaded.with_values({name: p * (1 + step)}).assemble()
+            f.append(modal_analysis(asm.M, asm.K).frequency_hz)
+        fd = (np.log(f[0]) - np.log(f[1])) / (np.log1p(1e-3) - np.log1p(-1e-3))
+        for m in missing:
+            assert m["sensitivity"][name] == pytest.approx(fd[m["model_mode"] - 1], abs=1e-3)
+    doc = json.loads(json.dumps(result.to_json()))
+    assert doc["undetermined"] == pytest.approx(bad)
+    assert len(doc["unidentified_modes"]) == 2
 
 
 def test_trf_from_a_far_start(clean_run) -> None:
