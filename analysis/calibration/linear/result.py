@@ -132,9 +132,9 @@ class LinearCalibration:
             )
             if acts:
                 lines.append(
-                    f"    {n} acts on model modes the test did not identify: "
-                    + ", ".join(f"{m['frequency_hz']:.2f} Hz (d ln f / d ln {n} "
-                                f"{m['sensitivity'][n]:+.3f})" for m in acts[:3])
+                    f"    {n} acts on model modes the test did not identify (d ln f / d ln {n}): "
+                    + ", ".join(f"{m['frequency_hz']:.2f} Hz ({m['sensitivity'][n]:+.3f})"
+                                for m in acts[:3])
                 )  # fmt: skip
         lines.append(
             "    keep them at their nominal values (calibrate the others with --parameters), "
