@@ -28,7 +28,7 @@ from analysis.system import (
     build_problem_dofs,
 )
 
-__all__ = ["Prediction", "SteppedSinePredictor", "sweeps_of"]
+__all__ = ["Prediction", "SteppedSinePredictor", "needed_rows", "sweeps_of"]
 
 _POWER = {"displacement": 0, "velocity": 1, "acceleration": 2}
 
@@ -52,6 +52,26 @@ class Prediction:
     d_frf: dict[str, np.ndarray]
     converged: np.ndarray
     messages: list[str]
+
+    @classmethod
+    def empty(cls, shape: tuple[int, int, int], params: Sequence[str]) -> Prediction:
+        """NaN FRFs and derivatives of ``shape`` (steps, channels, orders), nothing converged,
+        to be filled step by step."""
+        return cls(np.full(shape, np.nan + 0j), {p: np.full(shape, np.nan + 0j) for p in params},
+                   np.zeros(shape[0], dtype=bool), [])  # fmt: skip
+
+    def mark(self, row: int, point, frequency_hz: float) -> bool:
+        """Record whether the solution ``point`` of step ``row`` converged (with its message
+        when not); returns ``point.converged``."""
+        self.converged[row] = point.converged
+        if not point.converged:
+            self.messages.append(f"step {row} ({frequency_hz:.3f} Hz): {point.message}")
+        return bool(point.converged)
+
+
+def needed_rows(n_steps: int, rows: np.ndarray | None) -> np.ndarray:
+    """Boolean mask of the steps asked for (all when ``rows`` is None), shape (n_steps,)."""
+    return np.ones(n_steps, bool) if rows is None else np.isin(np.arange(n_steps), rows)
 
 
 def sweeps_of(data: SteppedSineData) -> list[np.ndarray]:
@@ -227,12 +247,8 @@ class SteppedSinePredictor:
             linear=lin,
         )
         d = self.data
-        n, C, H = d.n_steps, len(self.channel_indices), len(self.orders)
-        frf = np.full((n, C, H), np.nan + 0j)
-        dfrf = {p: np.full((n, C, H), np.nan + 0j) for p in params}
-        conv = np.zeros(n, dtype=bool)
-        msgs: list[str] = []
-        need = np.ones(n, bool) if rows is None else np.isin(np.arange(n), rows)
+        out = Prediction.empty((d.n_steps, len(self.channel_indices), len(self.orders)), params)
+        need = needed_rows(d.n_steps, rows)
         orders = np.array([float(o) for o in self.orders])
         sign = np.array(self._out_sign)[:, None]
         power = np.array(self._power)[:, None]
@@ -248,14 +264,12 @@ class SteppedSinePredictor:
                 wk = 2 * np.pi * d.frequency_hz[row] * orders  # (H,)
                 factor = sign * (1j * wk[None, :]) ** power / F[j][None, :] * self._force_sign
                 p = self._follow(pb, row, F[j], X, factor, H_meas[row])
-                conv[row] = p.converged
-                if not p.converged:
-                    msgs.append(f"step {row} ({d.frequency_hz[row]:.3f} Hz): {p.message}")
+                if not out.mark(row, p, d.frequency_hz[row]):
                     continue
                 X = p.X
-                frf[row] = p.outputs().T * factor
+                out.frf[row] = p.outputs().T * factor
                 if params and need[row]:
                     sens = point_sensitivities(pb, p, list(params))
                     for name in params:
-                        dfrf[name][row] = sens[name].d_outputs(pb.order_k).T * factor
-        return Prediction(frf, dfrf, conv, msgs)
+                        out.d_frf[name][row] = sens[name].d_outputs(pb.order_k).T * factor
+        return out

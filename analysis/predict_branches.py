@@ -20,7 +20,7 @@ import numpy as np
 
 from analysis.mhb.sensitivity import point_sensitivities
 from analysis.mhb.sweep import solve_steps
-from analysis.predict import Prediction, SteppedSinePredictor, sweeps_of
+from analysis.predict import Prediction, SteppedSinePredictor, needed_rows, sweeps_of
 from analysis.system import build_problem_dofs
 
 __all__ = ["BranchMatchedPredictor"]
@@ -130,7 +130,7 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         model = self.model if model is None else model
         pb = self.problem(model, extra_dofs)
         d = self.data
-        need = np.ones(d.n_steps, bool) if rows is None else np.isin(np.arange(d.n_steps), rows)
+        need = needed_rows(d.n_steps, rows)
         out = {}
         for sweep in sweeps_of(d):
             if not need[sweep].any():
@@ -258,23 +258,18 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         model = self.model.with_values(values) if values else self.model
         pb, points = self.solve(model, rows=rows)
         d = self.data
-        n, C, H = d.n_steps, len(self.channel_indices), len(self.compared)
-        frf = np.full((n, C, H), np.nan + 0j)
-        dfrf = {p: np.full((n, C, H), np.nan + 0j) for p in params}
-        conv = np.zeros(n, dtype=bool)
-        msgs: list[str] = []
-        need = np.ones(n, bool) if rows is None else np.isin(np.arange(n), rows)
+        C = len(self.channel_indices)
+        out = Prediction.empty((d.n_steps, C, len(self.compared)), params)
+        need = needed_rows(d.n_steps, rows)
         for row, p in points.items():
-            conv[row] = p.converged
-            if not p.converged:
-                msgs.append(f"step {row} ({d.frequency_hz[row]:.3f} Hz): {p.message}")
+            if not out.mark(row, p, d.frequency_hz[row]):
                 continue
-            frf[row], factor = self.frf_of(row, p)
+            out.frf[row], factor = self.frf_of(row, p)
             if params and need[row]:
                 sens = point_sensitivities(pb, p, list(params))
                 for name in params:
-                    dfrf[name][row] = (
+                    out.d_frf[name][row] = (
                         sens[name].d_outputs(pb.order_k[self.compared])[:, :C].T * factor
                     )
         sig = self.response_sigma(pb, points) if sigma else None
-        return Prediction(frf, dfrf, conv, msgs), sig
+        return out, sig
