@@ -274,8 +274,10 @@ def calibrate_linear(
     D = space.dp_dtheta(sol.x)
     cov = np.linalg.pinv(sol.jac.T @ sol.jac) * (2 * sol.cost / max(m - n, 1)) * np.outer(D, D)
     model_cal = model_s.with_values(values)
-    pairs = _pair_modes(model_cal, fit, rows, band, st.mac_min)
-    unidentified = _unidentified_modes(model_cal, names, pairs, band)
+    asm_cal = model_cal.assemble()
+    modes_cal = modal_analysis(asm_cal.M, asm_cal.K)
+    pairs = _pair_modes(modes_cal, fit, rows, band, st.mac_min)
+    unidentified = _unidentified_modes(model_cal, asm_cal, modes_cal, names, pairs, band)
     damping = DampingSpec(
         default_zeta=model.damping.default_zeta,
         per_mode={pr.model_mode: pr.zeta for pr in pairs if pr.model_mode is not None},
@@ -357,19 +359,16 @@ def _band(run: RunFRFs, st: LinearCalibrationSettings):
     return f[keep], run.H[keep], run.std()[keep], run.coherence[keep], band
 
 
-def _pair_modes(model: Model, fit, rows: list[int], band, mac_min: float):
-    asm = model.assemble()
-    modes = modal_analysis(asm.M, asm.K)
+def _pair_modes(modes, fit, rows: list[int], band, mac_min: float):
     q = max(int(np.count_nonzero(modes.frequency_hz <= 2 * band[1])), fit.n_modes)
     return match_modes(
         fit.frequency_hz, fit.zeta, fit.a.T, modes.frequency_hz[:q], modes.phi[rows, :q], mac_min
     )
 
 
-def _unidentified_modes(model: Model, names, pairs, band) -> list[dict[str, Any]]:
-    """The model's modes in ``band`` without a paired test mode, with ``d ln f / d ln p``."""
-    asm = model.assemble()
-    modes = modal_analysis(asm.M, asm.K)
+def _unidentified_modes(model: Model, asm, modes, names, pairs, band) -> list[dict[str, Any]]:
+    """The model's modes in ``band`` without a paired test mode, with ``d ln f / d ln p``
+    (``asm`` and ``modes``: the model's assembly and modal analysis)."""
     paired = {pr.model_mode - 1 for pr in pairs if pr.model_mode is not None}  # 1-based
     idx = [i for i, f in enumerate(modes.frequency_hz)
            if band[0] <= f <= band[1] and i not in paired]  # fmt: skip
