@@ -94,6 +94,8 @@ def run(quick: bool = False) -> dict:
         f" %, v {100 * rel['v_c']:+.2f} %; chi2/dof {cal.chi2_per_dof:.2f}"
     )
     print(f"cross-validation {cv_s:.1f} s: std ratio {np.round(cv.std_ratio, 2).tolist()}")
+    for line in cv.notes():
+        print(f"  {line}")
     print(val.summary())
     print(f"analysis total {total_s:.1f} s")
     return {

@@ -233,6 +233,8 @@ def _summary_markdown(s: dict, truth: str) -> str:
     if cv.get("stuck"):
         lines += ["", f"Warning: {len(cv['stuck'])} fold(s) could not leave the calibrated "
                   "optimum; the standard deviations understate the uncertainty."]  # fmt: skip
+    if cv.get("notes"):
+        lines += ["", *(f"- {note}" for note in cv["notes"])]
     v = s["validation"]
     lines += [
         "",

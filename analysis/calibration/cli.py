@@ -150,6 +150,8 @@ def cmd_crossval(args) -> dict:
                 f"  warning: {len(cv.stuck)} fold(s) could not leave the calibrated optimum "
                 f"({', '.join(cv.stuck)}): the standard deviations understate the uncertainty"
             )
+        for line in cv.notes():
+            print(f"  note: {line}")
     return {**cv.to_json(), "figure": str(fig)}
 
 

@@ -72,6 +72,21 @@ def write_report(folder: Path) -> dict[str, Path]:
                 f"{cv['fim_std'][j]:.3g} | {cv['std_ratio'][j]:.2f} |"
             )
         lines.append("")
+        lines += [f"- {note}" for note in cv.get("notes") or []]
+        if cv.get("fold_chi2") is not None:
+            names = " | ".join(f"share of {n}" for n in cv["names"])
+            lines += [
+                "",
+                f"| fold left out | chi2/value at the optimum | p (noise only) | {names} |",
+                "|---|---|---|" + "---|" * len(cv["names"]),
+            ]
+            for f, c, p, share in zip(cv["folds"], cv["fold_chi2"], cv["fold_p"],
+                                      cv["information_share"], strict=True):  # fmt: skip
+                shares = " | ".join(f"{100 * x:.0f} %" for x in share)
+                c_text = "" if c is None else f"{c:.2f}"
+                p_text = "" if p is None else f"{p:.2g}"
+                lines.append(f"| {f} | {c_text} | {p_text} | {shares} |")
+            lines.append("")
     if val:
         verdict = "PASS" if val["passed"] else "FAIL"
         lines += [

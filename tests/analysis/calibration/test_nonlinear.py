@@ -263,3 +263,68 @@ def test_a_fold_that_cannot_move_is_reported(run, calibrated, monkeypatch):
     cv = cross_validate(model, data, calibrated)
     assert cv.stuck == cv.folds and np.all(cv.std <= 1e-9 * np.abs(cv.mean))  # round-off only
     assert cv.to_json()["stuck"] == cv.folds
+
+
+def test_fold_diagnostics_name_the_fold_the_model_cannot_fit(run, calibrated, tmp_path):
+    """Each fold's chi-square at the optimum says whether the model fits it. On the clean file
+    every fold is consistent with the noise (chi-square test at 1e-3); with acc7's fundamental
+    at 6 N made 3 % too large (a systematic error no parameter can follow, 3 standard errors
+    per value) that fold, and only it, is flagged. Information shares are diagonal Fisher
+    information per fold: they sum to 1 per parameter."""
+    import shutil
+
+    import h5py
+
+    model, data = run
+    clean = cross_validate(model, data, calibrated)
+    assert clean.misfit_folds() == []
+    assert np.all((clean.fold_chi2 > 0.7) & (clean.fold_chi2 < 1.4))
+    assert np.allclose(clean.information_share.sum(axis=0), 1.0)
+    assert np.all(clean.information_share >= 0)
+    js = clean.to_json()
+    assert len(js["fold_chi2"]) == 9 and js["notes"] == clean.notes()
+
+    path = tmp_path / "acc7-6N-off.h5"
+    shutil.copy(data.path, path)
+    names = [c.name for c in data.channels]
+    rows = data.level_index == list(data.levels_n).index(6.0)
+    with h5py.File(path, "r+") as f:
+        response = f["steps/response"][...]
+        response[rows, names.index("acc7"), 0] *= 1.03
+        f["steps/response"][...] = response
+    bad = read_measurement(path)
+    cal = calibrate_nonlinear(model, bad, CalibrationSettings(n_starts=12, seed=1))
+    cv = cross_validate(model, bad, cal)
+    assert [cv.folds[j] for j in cv.misfit_folds()] == ["acc7 @ 6 N"]
+    worst = cv.folds.index("acc7 @ 6 N")
+    assert cv.fold_chi2[worst] > 2 and cv.fold_p[worst] < 1e-6
+
+
+def test_cross_validation_notes_explain_a_scatter_beyond_fim():
+    """The notes name the misfit folds for a scatter above FIM^-1, a dominant fold when one
+    carries most of a parameter's information, and say nothing when the two agree."""
+    from analysis.calibration.crossval import CrossValidation
+
+    folds = ["acc3 @ 2 N", "acc7 @ 2 N", "acc7 @ 6 N"]
+
+    def result(std, chi2, p, share):
+        return CrossValidation(
+            names=("k_c", "v_c"), folds=folds, estimates=np.zeros((3, 2)), mean=np.ones(2),
+            cov=np.diag(np.square(std)), fim_std=np.ones(2), iterations=[3, 3, 3],
+            seconds=0.0, fold_chi2=np.array(chi2), fold_p=np.array(p),
+            information_share=np.array(share),
+        )  # fmt: skip
+
+    even = [[0.3, 0.3], [0.35, 0.35], [0.35, 0.35]]
+    agree = result([1.2, 0.9], [1.0, 1.1, 0.9], [0.5, 0.2, 0.7], even)
+    assert agree.notes() == []
+    misfit = result([1.2, 2.6], [1.0, 1.1, 1.4], [0.5, 0.2, 1e-6], even)
+    (note,) = misfit.notes()
+    assert note.startswith("v_c: the folds scatter 2.60 x")
+    assert "acc7 @ 6 N (chi2/value 1.40" in note and "acc7 @ 2 N" not in note
+    dominant = result([3.0, 1.0], [1.0, 1.0, 1.0], [0.5, 0.5, 0.5],
+                      [[0.05, 0.3], [0.05, 0.3], [0.9, 0.4]])  # fmt: skip
+    (note,) = dominant.notes()
+    assert "acc7 @ 6 N carries 90 % of its information" in note and "misfits" not in note
+    low = result([0.3, 1.0], [1.0, 1.0, 1.0], [0.5, 0.5, 0.5], even)
+    assert "below 0.5" in low.notes()[0]
