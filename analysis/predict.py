@@ -11,6 +11,7 @@ Sensor masses from the file's channel table are part of the model.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -149,6 +150,15 @@ class SteppedSinePredictor:
         self._force_dof = self._dof(asm, act.point, act.direction, "actuator")
         self._force_sign = -1.0 if act.direction.startswith("-") else 1.0
         self.orders = data.orders
+        # the model is driven by every force the file measured: at the orders, and at the
+        # extra orders where the shaker pushed back at the response's harmonics
+        self.drive_orders = (*data.orders, *data.extra_orders)
+        self.drive_force = np.concatenate([data.force, data.extra_force], axis=1)
+        self.drive_force_std = np.concatenate([data.force_std, data.extra_force_std], axis=1)
+        den = math.lcm(*(o.denominator for o in self.drive_orders))
+        top = max(int(o * den) for o in self.drive_orders)
+        if top > n_harmonics:
+            self.settings["n_harmonics"] = top
         self.branch_tolerance = branch_tolerance
         self._linear_key = None
         self._linear = None
@@ -191,6 +201,10 @@ class SteppedSinePredictor:
             self._linear_key = key
         return self._linear
 
+    def _frf_k(self, pb) -> np.ndarray:
+        """Harmonic indices of the file's orders (the FRFs) in the balance ``pb``."""
+        return pb.order_k[: len(self.orders)]
+
     def _follow(self, pb, row: int, F: np.ndarray, X, factor: np.ndarray, H_row: np.ndarray):
         """Solve one step, on the branch the test was on.
 
@@ -209,7 +223,7 @@ class SteppedSinePredictor:
         def miss(q):
             if not q.converged:
                 return np.inf
-            model = q.outputs().T * factor
+            model = q.q_out[self._frf_k(pb)].T * factor
             return float(np.max(np.abs(model[:, 0] - H_row[:, 0]) / np.abs(H_row[:, 0])))
 
         m0 = miss(p)
@@ -241,7 +255,7 @@ class SteppedSinePredictor:
             model,
             [self._force_dof],
             self._out_dofs,
-            orders=self.orders,
+            orders=self.drive_orders,
             n_harmonics=self.settings["n_harmonics"],
             n_time=self.settings["n_time"],
             linear=lin,
@@ -253,23 +267,25 @@ class SteppedSinePredictor:
         sign = np.array(self._out_sign)[:, None]
         power = np.array(self._power)[:, None]
         H_meas, _ = self.measured()
+        k_frf = self._frf_k(pb)
         for sweep in sweeps_of(d):
             if not need[sweep].any():
                 continue
             last = sweep[np.flatnonzero(need[sweep]).max()]
             sweep = sweep[: np.flatnonzero(sweep == last)[0] + 1]
-            F = self._force_sign * d.force[sweep]
+            F = self._force_sign * self.drive_force[sweep]
             X = None
+            H = len(self.orders)
             for j, row in enumerate(sweep):
                 wk = 2 * np.pi * d.frequency_hz[row] * orders  # (H,)
-                factor = sign * (1j * wk[None, :]) ** power / F[j][None, :] * self._force_sign
+                factor = sign * (1j * wk[None, :]) ** power / F[j][None, :H] * self._force_sign
                 p = self._follow(pb, row, F[j], X, factor, H_meas[row])
                 if not out.mark(row, p, d.frequency_hz[row]):
                     continue
                 X = p.X
-                out.frf[row] = p.outputs().T * factor
+                out.frf[row] = p.q_out[k_frf].T * factor
                 if params and need[row]:
                     sens = point_sensitivities(pb, p, list(params))
                     for name in params:
-                        out.d_frf[name][row] = sens[name].d_outputs(pb.order_k).T * factor
+                        out.d_frf[name][row] = sens[name].d_outputs(k_frf).T * factor
         return out

@@ -89,7 +89,7 @@ class BranchMatchedPredictor(SteppedSinePredictor):
             model,
             [self._force_dof],
             [*self._out_dofs, *extra_dofs],
-            orders=self.orders,
+            orders=self.drive_orders,
             n_harmonics=self.settings["n_harmonics"],
             n_time=self.settings["n_time"],
             linear=self._linear_model(model),
@@ -136,7 +136,7 @@ class BranchMatchedPredictor(SteppedSinePredictor):
             if not need[sweep].any():
                 continue
             sweep = sweep[need[sweep]]  # the needed steps only, in the test's order
-            F = self._force_sign * d.force[sweep][:, :, None]
+            F = self._force_sign * self.drive_force[sweep][:, :, None]
             w = 2 * np.pi * d.frequency_hz[sweep]
             points = solve_steps(pb, w, F, max_substep_depth=MAX_SUBSTEP_DEPTH).points
             chosen = list(points)
@@ -198,7 +198,7 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         idx = self.channel_indices
         out = self._sigma.copy()
         sR = d.response_std[:, idx][:, :, self.compared]
-        sF = d.force_std
+        sF = self.drive_force_std
         kc = self.compared
         for row, p in points.items():
             if not p.converged:

@@ -186,6 +186,8 @@ class Acquire:
         Check for silent and saturated sensors (off for a noise-floor record at 0 V).
     purpose : str
         ``"noise"``, ``"loop-check"``, ``"control"`` or ``"record"`` (for logs and events).
+    extra_orders : tuple of Fraction
+        Orders the drive does not contain to estimate as well (:attr:`Measurement.extra`).
     """
 
     settle_periods: int
@@ -197,6 +199,7 @@ class Acquire:
     keep_samples: bool = False
     check_signals: bool = True
     purpose: str = "control"
+    extra_orders: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -220,6 +223,8 @@ class Measurement:
         Standard deviation of the averaged samples of each channel (channel units).
     samples : ndarray, shape (n, C), optional
         The averaged samples (``keep_samples``).
+    extra : HarmonicEstimate, optional
+        The same blocks at :attr:`Acquire.extra_orders` (None when none were asked for).
     """
 
     estimate: HarmonicEstimate
@@ -230,6 +235,7 @@ class Measurement:
     settling_message: str
     rms: np.ndarray
     samples: np.ndarray | None = None
+    extra: HarmonicEstimate | None = None
 
     @property
     def phasors(self) -> np.ndarray:

@@ -450,7 +450,10 @@ class RunEngine:
             if len(blocks) < cmd.blocks:
                 continue
             window = np.concatenate(blocks)
-            est = estimate_harmonics(window, self._fs, f, orders, cmd.block_periods)
+            est = estimate_harmonics(
+                window, self._fs, f, (*orders, *cmd.extra_orders), cmd.block_periods
+            )
+            est, extra = est.split(len(orders)) if cmd.extra_orders else (est, None)
             waited = (self._cursor - window.shape[0] - out.steady_index) // n
             if cmd.max_settle_periods is None:
                 break
@@ -482,6 +485,7 @@ class RunEngine:
             message,
             np.std(window, axis=0),
             window if cmd.keep_samples else None,
+            extra,
         )
 
     def _acquire_records(self, cmd: AcquireRecords) -> Records:

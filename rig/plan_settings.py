@@ -208,6 +208,11 @@ class AcquisitionSettings:
         Cross-fade between drive waveforms [s].
     store_raw : bool
         Keep the averaged time blocks of each recorded step in the file (``/raw``).
+    force_orders_up_to : int
+        Also record the drive force at every whole order up to this one that the drive does
+        not contain (the file's extra orders). Where the structure responds nonlinearly the
+        shaker pushes back at the harmonics of the response, and a model driven by the
+        measured force needs those forces too; 0: the drive's orders only.
     """
 
     block_periods: int = 1
@@ -220,9 +225,11 @@ class AcquisitionSettings:
     drift_tolerance: float = 0.005
     ramp_s: float = 0.05
     store_raw: bool = False
+    force_orders_up_to: int = 0
 
     def __post_init__(self) -> None:
         owner = "AcquisitionSettings"
+        _at_least(owner, "force_orders_up_to", self.force_orders_up_to, 0)
         _at_least(owner, "block_periods", self.block_periods, 1)
         _at_least(owner, "average_blocks", self.average_blocks, 4)
         _at_least(owner, "record_blocks", self.record_blocks, self.average_blocks)

@@ -41,6 +41,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from fractions import Fraction
 from typing import Any, ClassVar
 
 import numpy as np
@@ -190,6 +191,14 @@ class SteppedSinePlan:
     @property
     def n_steps(self) -> int:
         return len(self.steps())
+
+    @property
+    def extra_orders(self) -> tuple[Fraction, ...]:
+        """Whole orders up to ``acquisition.force_orders_up_to`` that the drive does not
+        contain: the force is recorded there too (the file's extra orders)."""
+        drive = set(self.excitation.orders)
+        top = self.acquisition.force_orders_up_to
+        return tuple(Fraction(k) for k in range(1, top + 1) if Fraction(k) not in drive)
 
     def force_targets(self) -> np.ndarray:
         """Target force phasors per level, shape (L, H), complex, N (the file's layout)."""

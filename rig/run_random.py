@@ -22,7 +22,7 @@ import numpy as np
 
 from analysis.measurement_file import RandomFRF
 from rig.commands import AcquireRecords, Notify, RunContext, SetWaveform, Warn, WriteRandom
-from rig.estimation.frf import h1_frf, welch_average_count
+from rig.estimation.frf import h1_frf, periodic_frf, welch_average_count
 from rig.events import PretestFinished
 from rig.faults import RunFault
 from rig.plans import RandomPlan
@@ -90,15 +90,26 @@ def _run(plan: RandomPlan, ctx: RunContext):
         records=acq.average_records, settle_records=acq.settle_records, purpose="average"
     )
     nperseg = n // acq.segments_per_record
-    est = h1_frf(
-        rec.samples[:, fi],
-        rec.samples,
-        fs,
-        nperseg,
-        window=acq.window,
-        overlap=acq.overlap,
-        band_hz=band,
+    # a periodic excitation read in whole periods: the ratio of the averaged spectra, which
+    # noise on the force does not bias (H1 is biased low where the force drops at resonances)
+    periodic = (
+        ex.signal == "periodic"
+        and acq.segments_per_record == 1
+        and acq.window == "boxcar"
+        and acq.overlap == 0
     )
+    if periodic:
+        est = periodic_frf(rec.samples[:, fi], rec.samples, fs, n, band_hz=band)
+    else:
+        est = h1_frf(
+            rec.samples[:, fi],
+            rec.samples,
+            fs,
+            nperseg,
+            window=acq.window,
+            overlap=acq.overlap,
+            band_hz=band,
+        )
     ok = np.isfinite(est.force_psd) & (est.force_psd > 0) & np.all(np.isfinite(est.h1), axis=1)
     coherence = np.nan_to_num(est.coherence[ok], nan=0.0)
     h1 = est.h1[ok].copy()
@@ -114,6 +125,7 @@ def _run(plan: RandomPlan, ctx: RunContext):
         overlap=acq.overlap,
         fs_hz=fs,
         rms_force_n=float(band_rms(rec.samples[:, [fi]], fs, band)[0]),
+        estimator="periodic" if periodic else "H1",
     )
     low = [
         f"{ch.name} {np.median(coherence[:, c]):.2f}"

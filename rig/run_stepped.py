@@ -41,7 +41,7 @@ from rig.commands import (
     WriteStep,
 )
 from rig.control.force_controller import ControlSettings, ForceController, StepControlRecord
-from rig.estimation.harmonics import HarmonicEstimate
+from rig.estimation.harmonics import pool_estimates
 from rig.events import ControlIteration, PretestFinished
 from rig.faults import RunFault
 from rig.gain_prediction import GainHistory
@@ -140,31 +140,17 @@ def combine_measurements(a: Measurement, b: Measurement) -> Measurement:
     The blocks of ``b`` follow those of ``a`` by whole base periods, so every block phasor
     shares ``a``'s time origin.
     """
-    ea, eb = a.estimate, b.estimate
-    bp = np.concatenate([ea.block_phasors, eb.block_phasors])
-    n = bp.shape[0]
-    mean = bp.mean(axis=0)
-    std = np.sqrt(np.sum(np.abs(bp - mean) ** 2, axis=0) / (n - 1) / n)
-    na, nb = ea.block_phasors.shape[0], eb.block_phasors.shape[0]
-    npr = np.sqrt(
-        (na * np.nan_to_num(ea.nonperiodic_rms) ** 2 + nb * np.nan_to_num(eb.nonperiodic_rms) ** 2)
-        / n
-    )
-    est = HarmonicEstimate(
-        orders=ea.orders,
-        frequencies_hz=ea.frequencies_hz,
-        phasors=mean,
-        std=std,
-        block_phasors=bp,
-        nonperiodic_rms=npr,
-        samples_per_block=ea.samples_per_block,
-        first_index_offset=0,
-    )
+    est = pool_estimates(a.estimate, b.estimate)
+    extra = None
+    if a.extra is not None and b.extra is not None:
+        extra = pool_estimates(a.extra, b.extra)
+    na, nb = a.estimate.n_blocks, b.estimate.n_blocks
+    n = na + nb
     samples = None
     if a.samples is not None and b.samples is not None:
         samples = np.concatenate([a.samples, b.samples])
     rms = np.sqrt((na * a.rms**2 + nb * b.rms**2) / n)
-    return dataclasses.replace(a, estimate=est, rms=rms, samples=samples)
+    return dataclasses.replace(a, estimate=est, rms=rms, samples=samples, extra=extra)
 
 
 def _run(plan: SteppedSinePlan, ctx: RunContext, completed: frozenset, initial_gain, recorded):
@@ -240,6 +226,7 @@ def _one_step(
             settling_tolerance=acq.settling_tolerance,
             drift_tolerance=acq.drift_tolerance,
             keep_samples=acq.store_raw,
+            extra_orders=plan.extra_orders,
         )
         force, force_std = m.phasors[fi], np.nan_to_num(m.std[fi])
         decision = controller.next_drive(drive, force, force_std)
@@ -328,6 +315,7 @@ def _one_step(
             block_periods=acq.block_periods,
             keep_samples=acq.store_raw,
             purpose="record",
+            extra_orders=plan.extra_orders,
         )
         m = combine_measurements(m, more)
     force = m.phasors[fi]
@@ -347,6 +335,8 @@ def _one_step(
         control_iterations=control.iterations,
         control_converged=accepted,
         control_error=float(np.max(np.abs(force - targets)) / t1),
+        extra_force=None if m.extra is None else m.extra.phasors[fi].copy(),
+        extra_force_std=None if m.extra is None else np.nan_to_num(m.extra.std[fi]).copy(),
     )
     t0 = m.first_index / ctx.sample_rate_hz
     yield WriteStep(record, control, m.samples, t0, m.settled)

@@ -453,6 +453,8 @@ class TestRun:
                 setup=self.setup.to_dict(),
                 raw=plan.acquisition.store_raw,
                 overwrite=self.overwrite,
+                extra_orders_num=[o.numerator for o in plan.extra_orders],
+                extra_orders_den=[o.denominator for o in plan.extra_orders],
             )
         completed = writer.completed_plan_indices
         recorded = {}

@@ -281,7 +281,9 @@ class Screen:
             rows = np.array(sorted(r for r, q in points.items() if q.converged), dtype=int)
             self.rows = rows
             H = pb.n_harmonics
-            self._basis = _Basis(H, self.n_time, np.asarray(pb.order_k))
+            # the file's orders (a file's extra force orders drive the anchor solution only)
+            K = len(self.predictor.orders)
+            self._basis = _Basis(H, self.n_time, np.asarray(pb.order_k)[:K])
             self._harmonic_basis = HarmonicBasis(H, self.n_time)
         return self._base_points
 

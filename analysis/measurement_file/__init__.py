@@ -5,6 +5,15 @@ with this package, as must any other tool. The reader validates everything and f
 :class:`MeasurementFileError` naming the file, the path inside it, what was expected and what
 was found.
 
+Two compatible extensions of format_version 1 (files without them read as before):
+
+- ``/extra_orders_num``, ``/extra_orders_den`` (E,) int64 with ``/steps/extra_force`` (n, E)
+  complex128 and ``/steps/extra_force_std`` (n, E) float64: the drive force at orders the drive
+  does not contain (the shaker's push-back at the response's harmonics); all four or none.
+  A model driven by the measured force is driven by these too.
+- ``/frf`` attribute ``estimator``: ``"H1"`` or ``"periodic"`` (the ratio of the spectra
+  averaged over the periods of a periodic excitation, not biased by noise on the force).
+
 Modules
 -------
 schema

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from .records import Actuator, ChannelInfo
-from .schema import STEP_FIELDS
+from .schema import step_fields
 
 __all__ = ["RandomData", "RawRecord", "RunData", "SteppedSineData"]
 
@@ -124,6 +124,14 @@ class SteppedSineData(RunData):
         POSIX time of completion.
     raw_plan_indices : tuple of int
         Completed steps with raw time data in ``/raw`` (read with :func:`read_raw`).
+    extra_orders_num, extra_orders_den : ndarray of int64, shape (E,)
+        Orders the drive does not contain at which the drive force was recorded too (see
+        :attr:`extra_orders`); ``E = 0`` for a file without them.
+    extra_force : ndarray, shape (n, E), complex, N
+        Drive-force phasors at the extra orders: the shaker's push-back at harmonics the
+        structure's response carries. A model driven by the measured force is driven by these
+        too.
+    extra_force_std : ndarray, shape (n, E), N
     """
 
     levels_n: np.ndarray
@@ -146,6 +154,30 @@ class SteppedSineData(RunData):
     control_error: np.ndarray
     timestamp: np.ndarray
     raw_plan_indices: tuple[int, ...]
+    extra_orders_num: np.ndarray = None  # type: ignore[assignment]
+    extra_orders_den: np.ndarray = None  # type: ignore[assignment]
+    extra_force: np.ndarray = None  # type: ignore[assignment]
+    extra_force_std: np.ndarray = None  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        empty = {
+            "extra_orders_num": np.zeros(0, np.int64),
+            "extra_orders_den": np.zeros(0, np.int64),
+            "extra_force": np.zeros((self.n_steps, 0), complex),
+            "extra_force_std": np.zeros((self.n_steps, 0)),
+        }
+        for name, value in empty.items():
+            if getattr(self, name) is None:
+                value.flags.writeable = False
+                object.__setattr__(self, name, value)
+
+    @property
+    def extra_orders(self) -> tuple[Fraction, ...]:
+        """The extra orders as exact fractions, shape (E,)."""
+        return tuple(
+            Fraction(int(a), int(b))
+            for a, b in zip(self.extra_orders_num, self.extra_orders_den, strict=True)
+        )
 
     @property
     def orders(self) -> tuple[Fraction, ...]:
@@ -179,7 +211,7 @@ class SteppedSineData(RunData):
         """
         idx = np.arange(self.n_steps)[np.asarray(rows)]
         changes: dict[str, Any] = {}
-        for spec in STEP_FIELDS:
+        for spec in step_fields(self.extra_orders_num.size):
             arr = getattr(self, spec.field)[idx]
             arr.flags.writeable = False
             changes[spec.field] = arr

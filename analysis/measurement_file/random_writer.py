@@ -84,7 +84,7 @@ def write_random(
         g.create_dataset("h1", data=frf.h1)
         g.create_dataset("coherence", data=frf.coherence)
         g.create_dataset("force_psd", data=frf.force_psd)
-        g.attrs["estimator"] = RandomFRF.estimator
+        g.attrs["estimator"] = frf.estimator
         g.attrs["n_averages"] = np.int64(frf.n_averages)
         g.attrs["window"] = frf.window
         g.attrs["overlap"] = frf.overlap

@@ -32,10 +32,12 @@ import numpy as np
 from .data import RandomData, RawRecord, SteppedSineData
 from .h5check import FileChecker, as_text, open_file
 from .records import (
+    ESTIMATORS,
     Actuator,
     ChannelInfo,
     RandomFRF,
     check_channels,
+    check_extra_orders,
     check_plan,
     drive_force_index,
 )
@@ -46,12 +48,12 @@ from .schema import (
     FORMAT_VERSION,
     KIND_STEPPED_SINE,
     KINDS,
-    STEP_FIELDS,
     FieldValueError,
     check_array,
     check_float,
     is_copy,
     is_string_field,
+    step_fields,
 )
 
 __all__ = ["load_open_file", "read_measurement", "read_raw"]
@@ -248,13 +250,28 @@ class _Checker(FileChecker):
             levels, num, den, targets = check_plan(*raw_plan.values())
         except FieldValueError as exc:
             self.fail(f"/{exc.field}", exc.expected, exc.found)
+        extra = [f"/{n}" for n in ("extra_orders_num", "extra_orders_den")]
+        present = [loc in self.f for loc in extra]
+        if any(present) and not all(present):
+            have, missing = (extra[0], extra[1]) if present[0] else (extra[1], extra[0])
+            self.fail(missing, f"a dataset beside {have}", "none")
+        extra_num = extra_den = np.zeros(0, np.int64)
+        if all(present):
+            try:
+                extra_num, extra_den = check_extra_orders(
+                    self.read(extra[0], ""), self.read(extra[1], ""), num, den
+                )
+            except FieldValueError as exc:
+                self.fail(f"/{exc.field}", exc.expected, exc.found)
         out: dict[str, Any] = {
             "levels_n": levels,
             "orders_num": num,
             "orders_den": den,
             "force_targets": targets,
+            "extra_orders_num": extra_num,
+            "extra_orders_den": extra_den,
         }
-        out.update(self.steps(n_channels=len(channels), n_orders=num.size))
+        out.update(self.steps(len(channels), num.size, extra_num.size))
         n_levels = levels.size
         bad = np.flatnonzero(out["level_index"] >= n_levels)
         if bad.size:
@@ -287,12 +304,12 @@ class _Checker(FileChecker):
         out["raw_plan_indices"] = self.raw_indices(len(channels), set(plans.tolist()))
         return out
 
-    def steps(self, n_channels: int, n_orders: int) -> dict[str, np.ndarray]:
+    def steps(self, n_channels: int, n_orders: int, n_extra: int = 0) -> dict[str, np.ndarray]:
         steps = self.group("/steps")
         n = self.attr_int(steps, "n_complete")
-        sizes = {"C": n_channels, "H": n_orders}
+        sizes = {"C": n_channels, "H": n_orders, "E": n_extra}
         out = {}
-        for spec in STEP_FIELDS:
+        for spec in step_fields(n_extra):
             loc = f"/steps/{spec.name}"
             ds = self.dataset(loc)
             dims = tuple(sizes[d] for d in spec.dims)
@@ -350,8 +367,8 @@ class _Checker(FileChecker):
     def random(self, channels: tuple[ChannelInfo, ...]) -> dict[str, Any]:
         frf = self.group("/frf")
         estimator = self.attr_text(frf, "estimator")
-        if estimator != RandomFRF.estimator:
-            self.fail("/frf", repr(RandomFRF.estimator), repr(estimator), "estimator")
+        if estimator not in ESTIMATORS:
+            self.fail("/frf", f"one of {ESTIMATORS}", repr(estimator), "estimator")
         freq = self.dataset("/frf/frequency")
         if freq.ndim != 1:
             self.fail(freq.name, "shape (nf,)", f"shape {freq.shape}")
@@ -373,7 +390,7 @@ class _Checker(FileChecker):
                 self.fail(loc, f"shape {named} = {want}", f"shape {found}")
             values[field] = self.read(loc, "complex128" if field == "h1" else "")
         try:
-            result = RandomFRF(**values)
+            result = RandomFRF(**values, estimator=estimator)
             result.check_drive_force(drive_force_index(channels))
         except FieldValueError as exc:
             loc, attribute = _FRF_PLACES[exc.field]

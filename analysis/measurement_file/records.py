@@ -11,12 +11,13 @@ import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from fractions import Fraction
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
 from .schema import (
     DIRECTIONS,
+    EXTRA_FORCE_FIELDS,
     QUANTITIES,
     ROLES,
     STEP_FIELDS,
@@ -32,13 +33,17 @@ __all__ = [
     "Actuator",
     "ChannelInfo",
     "RandomFRF",
+    "ESTIMATORS",
     "StepRecord",
     "check_channels",
+    "check_extra_orders",
     "check_plan",
     "drive_force_index",
 ]
 
-_ESTIMATOR = "H1"
+ESTIMATORS = ("H1", "periodic")
+"""FRF estimators of a random run: ``"H1"`` (Welch cross- over auto-spectrum) and
+``"periodic"`` (ratio of the period-averaged spectra of a periodic excitation)."""
 
 
 @dataclass(frozen=True)
@@ -245,6 +250,61 @@ def check_plan(
     return levels, num, den, targets
 
 
+def check_extra_orders(
+    extra_orders_num: Any, extra_orders_den: Any, orders_num: np.ndarray, orders_den: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Validate the extra orders of a stepped-sine file (the drive force recorded there).
+
+    Parameters
+    ----------
+    extra_orders_num, extra_orders_den : array_like of int, shape (E,)
+        Orders as fractions, both >= 1, distinct and none of them an order of the file
+        (``orders_num / orders_den``); ``E`` may be 0.
+    orders_num, orders_den : ndarray of int64, shape (H,)
+        The file's orders (validated by :func:`check_plan`).
+
+    Returns
+    -------
+    tuple of ndarray
+        ``(extra_orders_num, extra_orders_den)`` as read-only int64 copies.
+
+    Raises
+    ------
+    FieldValueError
+        With ``field`` ``extra_orders_num`` or ``extra_orders_den``.
+    """
+    o = "stepped-sine plan"
+    if np.size(extra_orders_num) == 0 and np.size(extra_orders_den) == 0:
+        extra_orders_num = extra_orders_den = np.zeros(0, np.int64)
+    num = check_array(
+        extra_orders_num,
+        dtype="int64",
+        shape=(None,),
+        check="at-least-one",
+        owner=o,
+        field="extra_orders_num",
+    )
+    den = check_array(
+        extra_orders_den,
+        dtype="int64",
+        shape=num.shape,
+        check="at-least-one",
+        owner=o,
+        field="extra_orders_den",
+    )
+    extra = [Fraction(int(a), int(b)) for a, b in zip(num, den, strict=True)]
+    orders = {Fraction(int(a), int(b)) for a, b in zip(orders_num, orders_den, strict=True)}
+    repeated = sorted({str(x) for x in extra if extra.count(x) > 1})
+    if repeated:
+        raise FieldValueError(o, "extra_orders_num", "distinct orders", f"repeated {repeated}")
+    shared = sorted(str(x) for x in set(extra) & orders)
+    if shared:
+        raise FieldValueError(
+            o, "extra_orders_num", "orders the drive does not contain", f"{shared} (in /orders)"
+        )
+    return num, den
+
+
 @dataclass(frozen=True, eq=False)
 class StepRecord:
     """One completed step of a stepped-sine run: one row of every ``/steps`` dataset.
@@ -282,6 +342,9 @@ class StepRecord:
         Final max_k |F_k - F_target,k| / |F_target,1|, >= 0.
     timestamp : float
         POSIX time of completion [s]; defaults to now.
+    extra_force, extra_force_std : ndarray, shape (E,), optional
+        Drive-force phasors and their standard errors at the file's extra orders (orders the
+        drive does not contain); both or neither.
     """
 
     plan_index: int
@@ -299,11 +362,14 @@ class StepRecord:
     control_converged: bool
     control_error: float
     timestamp: float = field(default_factory=time.time)
+    extra_force: np.ndarray | None = None
+    extra_force_std: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         owner = f"StepRecord (plan_index {self.plan_index!r})"
         values: dict[str, Any] = {}
-        for spec in STEP_FIELDS:
+        extra = self.extra_force is not None or self.extra_force_std is not None
+        for spec in STEP_FIELDS + (EXTRA_FORCE_FIELDS if extra else ()):
             shape = tuple(None for _ in spec.dims)
             arr = check_array(
                 getattr(self, spec.field),
@@ -334,6 +400,13 @@ class StepRecord:
                 f"shape {resp.shape} like response",
                 f"shape {values['response_std'].shape}",
             )
+        if extra and values["extra_force_std"].shape != values["extra_force"].shape:
+            raise FieldValueError(
+                owner,
+                "extra_force_std",
+                f"shape {values['extra_force'].shape} like extra_force",
+                f"shape {values['extra_force_std'].shape}",
+            )
         for key, value in values.items():
             object.__setattr__(self, key, value)
 
@@ -358,7 +431,7 @@ class StepRecord:
 
 @dataclass(frozen=True, eq=False)
 class RandomFRF:
-    """The H1 frequency-response estimate of a random-excitation run: ``/frf``.
+    """The frequency-response estimate of a random-excitation run: ``/frf``.
 
     Attributes
     ----------
@@ -380,6 +453,11 @@ class RandomFRF:
         Sampling rate [Hz], > 0.
     rms_force_n : float
         RMS of the drive force [N], >= 0.
+    estimator : str
+        How ``h1`` was estimated (:data:`ESTIMATORS`): ``"H1"``, the Welch cross-spectrum over
+        the force's auto-spectrum, or ``"periodic"``, the ratio of the spectra averaged over
+        the periods of a periodic excitation (not biased by noise on the force, where H1 is
+        biased low by ``1 / (1 + S_nn / S_ff)``).
     """
 
     frequency_hz: np.ndarray
@@ -392,8 +470,7 @@ class RandomFRF:
     fs_hz: float
     rms_force_n: float
 
-    estimator: ClassVar[str] = _ESTIMATOR
-    """The only estimator of format_version 1."""
+    estimator: str = "H1"
 
     def __post_init__(self) -> None:
         o = "RandomFRF"
@@ -438,6 +515,8 @@ class RandomFRF:
         }
         if not fix["window"].strip():
             raise FieldValueError(o, "window", "a window name", repr(self.window))
+        if self.estimator not in ESTIMATORS:
+            raise FieldValueError(o, "estimator", f"one of {ESTIMATORS}", repr(self.estimator))
         for key, value in fix.items():
             object.__setattr__(self, key, value)
 

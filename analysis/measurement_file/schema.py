@@ -30,6 +30,7 @@ __all__ = [
     "KINDS",
     "QUANTITIES",
     "ROLES",
+    "EXTRA_FORCE_FIELDS",
     "STEP_FIELDS",
     "ArraySpec",
     "FieldValueError",
@@ -37,6 +38,7 @@ __all__ = [
     "channel_table_dtype",
     "check_array",
     "safe_std",
+    "step_fields",
 ]
 
 FORMAT = "rig-measurement"
@@ -235,6 +237,19 @@ STEP_FIELDS: tuple[ArraySpec, ...] = (
     ArraySpec("timestamp", "float64", (), "s"),
 )
 """The datasets of ``/steps`` in contract order (each has a leading step axis)."""
+
+EXTRA_FORCE_FIELDS: tuple[ArraySpec, ...] = (
+    ArraySpec("extra_force", "complex128", ("E",), "N"),
+    ArraySpec("extra_force_std", "float64", ("E",), "N", "nonnegative"),
+)
+"""The optional datasets of ``/steps`` with the drive force at the extra orders
+(``/extra_orders_num``, ``/extra_orders_den``): orders the drive does not contain at which the
+force gauge still measures a force (present exactly when the file has extra orders)."""
+
+
+def step_fields(n_extra: int) -> tuple[ArraySpec, ...]:
+    """The ``/steps`` datasets of a file with ``n_extra`` extra orders."""
+    return STEP_FIELDS + (EXTRA_FORCE_FIELDS if n_extra else ())
 
 
 def _describe_dtype(dtype: np.dtype) -> str:

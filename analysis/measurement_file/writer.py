@@ -27,18 +27,19 @@ from .records import (
     ChannelInfo,
     StepRecord,
     check_channels,
+    check_extra_orders,
     check_plan,
     drive_force_index,
 )
 from .schema import (
     FINAL_STATUSES,
     KIND_STEPPED_SINE,
-    STEP_FIELDS,
     FieldValueError,
     MeasurementFileError,
     check_array,
     check_float,
     check_int,
+    step_fields,
 )
 
 __all__ = ["SteppedSineWriter", "create_stepped_sine", "open_for_resume"]
@@ -62,6 +63,8 @@ def create_stepped_sine(
     raw: bool = False,
     software: Mapping[str, str] | None = None,
     overwrite: bool = False,
+    extra_orders_num: Any = (),
+    extra_orders_den: Any = (),
 ) -> SteppedSineWriter:
     """Create a stepped-sine measurement file and return its writer.
 
@@ -89,6 +92,10 @@ def create_stepped_sine(
         Extra package -> version entries for the ``software`` attribute.
     overwrite : bool
         Replace an existing file instead of refusing.
+    extra_orders_num, extra_orders_den : array_like of int, shape (E,)
+        Orders the drive does not contain at which every step also records the drive force
+        (``StepRecord.extra_force``), e.g. the harmonics 4-8 of a drive with orders 1-3;
+        empty (the default): none, and the file has no extra-order datasets.
 
     Returns
     -------
@@ -107,6 +114,7 @@ def create_stepped_sine(
         raise FieldValueError("create_stepped_sine", "actuator", "an Actuator", repr(actuator))
     chans = check_channels(channels)
     levels, num, den, targets = check_plan(levels_n, orders_num, orders_den, force_targets)
+    extra_num, extra_den = check_extra_orders(extra_orders_num, extra_orders_den, num, den)
     config_json = to_json(config, "config")
     setup_json = to_json(setup, "setup")
     versions = software_versions(software)
@@ -127,9 +135,12 @@ def create_stepped_sine(
         f.create_dataset("orders_num", data=num)
         f.create_dataset("orders_den", data=den)
         f.create_dataset("force_targets", data=targets)
+        if extra_num.size:
+            f.create_dataset("extra_orders_num", data=extra_num)
+            f.create_dataset("extra_orders_den", data=extra_den)
         steps = f.create_group("steps")
-        sizes = {"C": n_ch, "H": n_ord}
-        for spec in STEP_FIELDS:
+        sizes = {"C": n_ch, "H": n_ord, "E": extra_num.size}
+        for spec in step_fields(extra_num.size):
             dims = tuple(sizes[d] for d in spec.dims)
             steps.create_dataset(
                 spec.name,
@@ -176,7 +187,8 @@ def open_for_resume(path: str | PathLike[str]) -> SteppedSineWriter:
     f = h5py.File(path, "r+")
     try:
         n = data.n_steps
-        for spec in STEP_FIELDS:
+        fields = step_fields(data.extra_orders_num.size)
+        for spec in fields:
             ds = f["steps"][spec.name]
             if ds.chunks is None or ds.maxshape[0] is not None:
                 raise MeasurementFileError(
@@ -185,7 +197,7 @@ def open_for_resume(path: str | PathLike[str]) -> SteppedSineWriter:
                     "a dataset resizable along axis 0 (chunked, maxshape None) to append to",
                     f"a fixed-size dataset (maxshape {ds.maxshape})",
                 )
-        for spec in STEP_FIELDS:
+        for spec in fields:
             ds = f["steps"][spec.name]
             if ds.shape[0] != n:
                 ds.resize(n, axis=0)
@@ -236,6 +248,8 @@ class SteppedSineWriter:
         self._channels = data.channels
         self._n_levels = int(data.levels_n.size)
         self._n_orders = int(data.orders_num.size)
+        self._n_extra = int(data.extra_orders_num.size)
+        self._fields = step_fields(self._n_extra)
         self._drive = drive_force_index(data.channels)
         self._completed = set(data.plan_index.tolist())
         self._n = data.n_steps
@@ -291,7 +305,7 @@ class SteppedSineWriter:
         row = self._check_record(record)
         n = self._n
         steps = f["steps"]
-        for spec in STEP_FIELDS:
+        for spec in self._fields:
             self._write_row(steps[spec.name], n, row[spec.name])
         f.flush()
         steps.attrs["n_complete"] = np.int64(n + 1)
@@ -324,7 +338,13 @@ class SteppedSineWriter:
             record.check_drive_force(self._drive)
         except FieldValueError as exc:
             self._reject(f"/steps/{exc.field}", exc.expected, exc.found)
-        return {spec.name: getattr(record, spec.field) for spec in STEP_FIELDS}
+        extra = None if record.extra_force is None else record.extra_force.shape
+        if extra != ((self._n_extra,) if self._n_extra else None):
+            want = (
+                f"shape ({self._n_extra},) per step" if self._n_extra else "none (no /extra_orders)"
+            )
+            self._reject("/steps/extra_force", want, "none" if extra is None else f"shape {extra}")
+        return {spec.name: getattr(record, spec.field) for spec in self._fields}
 
     def _reject(self, location: str, expected: str, found: str) -> NoReturn:
         raise MeasurementFileError(self._path, location, expected, found)
@@ -386,7 +406,7 @@ class SteppedSineWriter:
             raise ValueError(f"finish: message must be a string, got {type(message).__name__}")
         f = self._require_open()
         try:
-            for spec in STEP_FIELDS:  # drop a partly written row left by a failed append
+            for spec in self._fields:  # drop a partly written row left by a failed append
                 ds = f["steps"][spec.name]
                 if ds.shape[0] != self._n:
                     ds.resize(self._n, axis=0)

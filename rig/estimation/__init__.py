@@ -1,6 +1,6 @@
-"""Estimation from acquired time blocks: harmonic phasors, settling, and H1 FRFs."""
+"""Estimation from acquired time blocks: harmonic phasors, settling, and FRFs (H1, periodic)."""
 
-from rig.estimation.frf import H1Estimate, h1_frf, welch_average_count
+from rig.estimation.frf import H1Estimate, h1_frf, periodic_frf, welch_average_count
 from rig.estimation.harmonics import (
     HarmonicEstimate,
     estimate_harmonics,
@@ -17,6 +17,7 @@ __all__ = [
     "check_settling",
     "estimate_harmonics",
     "h1_frf",
+    "periodic_frf",
     "period_aligned_offset",
     "samples_per_period",
     "welch_average_count",

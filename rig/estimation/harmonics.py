@@ -23,6 +23,7 @@ nonlinearity) are orthogonal to the orders and do not leak.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Iterable
@@ -87,6 +88,43 @@ class HarmonicEstimate:
     def n_blocks(self) -> int:
         """Number of averaged blocks B."""
         return self.block_phasors.shape[0]
+
+    def split(self, n: int) -> tuple[HarmonicEstimate, HarmonicEstimate]:
+        """The first ``n`` orders and the others, as two estimates from the same blocks."""
+
+        def part(sl: slice) -> HarmonicEstimate:
+            return dataclasses.replace(
+                self,
+                orders=self.orders[sl],
+                frequencies_hz=self.frequencies_hz[sl],
+                phasors=self.phasors[:, sl],
+                std=self.std[:, sl],
+                block_phasors=self.block_phasors[:, :, sl],
+            )
+
+        return part(slice(0, n)), part(slice(n, None))
+
+
+def pool_estimates(a: HarmonicEstimate, b: HarmonicEstimate) -> HarmonicEstimate:
+    """One estimate from the blocks of two consecutive ones at the same drive and orders.
+
+    The blocks of ``b`` must follow those of ``a`` by whole base periods, so that every block
+    phasor shares ``a``'s time origin.
+    """
+    if a.orders != b.orders:
+        raise ValueError(f"pool_estimates: different orders {a.orders} and {b.orders}")
+    bp = np.concatenate([a.block_phasors, b.block_phasors])
+    n = bp.shape[0]
+    mean = bp.mean(axis=0)
+    std = np.sqrt(np.sum(np.abs(bp - mean) ** 2, axis=0) / (n - 1) / n)
+    na, nb = a.n_blocks, b.n_blocks
+    npr = np.sqrt(
+        (na * np.nan_to_num(a.nonperiodic_rms) ** 2 + nb * np.nan_to_num(b.nonperiodic_rms) ** 2)
+        / n
+    )
+    return dataclasses.replace(
+        a, phasors=mean, std=std, block_phasors=bp, nonperiodic_rms=npr, first_index_offset=0
+    )
 
 
 def samples_per_period(

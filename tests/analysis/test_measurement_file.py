@@ -76,6 +76,70 @@ def test_stepped_sine_round_trip(tmp_path: Path) -> None:
         data.response[0, 0, 0] = 0  # read-only
 
 
+def test_extra_force_orders_round_trip_take_and_resume(tmp_path: Path) -> None:
+    """The drive force at orders the drive does not contain is stored beside the orders'."""
+    rng = np.random.default_rng(3)
+    records = [
+        dataclasses.replace(
+            r,
+            extra_force=rng.normal(size=2) + 1j * rng.normal(size=2),
+            extra_force_std=np.full(2, 1e-3 * (i + 1)),
+        )
+        for i, r in enumerate(ms.sample_step_records())
+    ]
+    kwargs = ms.sample_stepped_sine_kwargs() | {
+        "extra_orders_num": [4, 5],
+        "extra_orders_den": [1, 1],
+    }
+    path = tmp_path / "run.h5"
+    with create_stepped_sine(path, **kwargs) as writer:
+        for r in records[:12]:
+            writer.append_step(r)
+        with pytest.raises(MeasurementFileError, match=r"/steps/extra_force.*shape \(2,\)"):
+            writer.append_step(
+                dataclasses.replace(records[12], extra_force=None, extra_force_std=None)
+            )
+    with h5py.File(path, "r") as f:
+        np.testing.assert_array_equal(f["extra_orders_num"][()], [4, 5])
+        assert f["steps/extra_force"].shape == (12, 2)
+    with open_for_resume(path) as writer:
+        for r in records[12:]:
+            writer.append_step(r)
+        writer.finish("success")
+    data = _read_stepped(path)
+    _assert_steps_equal(data, records)
+    assert data.extra_orders == (Fraction(4), Fraction(5))
+    np.testing.assert_array_equal(data.extra_force, [r.extra_force for r in records])
+    np.testing.assert_array_equal(data.extra_force_std, [r.extra_force_std for r in records])
+    part = data.take([3, 1])
+    np.testing.assert_array_equal(part.extra_force, data.extra_force[[3, 1]])
+
+    plain = _read_stepped(ms.write_sample_stepped_sine(tmp_path / "plain.h5"))
+    assert plain.extra_orders == () and plain.extra_force.shape == (20, 0)
+    with create_stepped_sine(tmp_path / "p2.h5", **ms.sample_stepped_sine_kwargs()) as writer:
+        with pytest.raises(MeasurementFileError, match="no /extra_orders"):
+            writer.append_step(records[0])
+        writer.finish("aborted")
+    with pytest.raises(FieldValueError, match="orders the drive does not contain"):
+        create_stepped_sine(
+            tmp_path / "bad.h5",
+            **ms.sample_stepped_sine_kwargs() | {"extra_orders_num": [3], "extra_orders_den": [1]},
+        )
+    with pytest.raises(FieldValueError, match="extra_force_std"):
+        dataclasses.replace(records[0], extra_force_std=np.zeros(3))
+
+
+def test_extra_force_orders_need_both_datasets(tmp_path: Path) -> None:
+    kwargs = ms.sample_stepped_sine_kwargs() | {"extra_orders_num": [4], "extra_orders_den": [1]}
+    path = tmp_path / "run.h5"
+    with create_stepped_sine(path, **kwargs) as writer:
+        writer.finish("success")
+    with h5py.File(path, "r+") as f:
+        del f["extra_orders_den"]
+    with pytest.raises(MeasurementFileError, match="/extra_orders_den.*beside /extra_orders_num"):
+        read_measurement(path)
+
+
 def test_stepped_sine_on_disk_layout(tmp_path: Path) -> None:
     path = ms.write_sample_stepped_sine(tmp_path / "run.h5")
     with h5py.File(path, "r") as f:
