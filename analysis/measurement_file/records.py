@@ -193,6 +193,29 @@ def drive_force_index(channels: tuple[ChannelInfo, ...]) -> int:
     return next(i for i, ch in enumerate(channels) if ch.role == "drive-force")
 
 
+def _check_orders(
+    num_in: Any, den_in: Any, name: str, owner: str
+) -> tuple[np.ndarray, np.ndarray, list[Fraction]]:
+    """``(num, den, fractions)`` of the datasets ``<name>_num`` and ``<name>_den``: int64,
+    same shape, both >= 1, distinct fractions."""
+    num = check_array(
+        num_in, dtype="int64", shape=(None,), check="at-least-one", owner=owner, field=f"{name}_num"
+    )
+    den = check_array(
+        den_in,
+        dtype="int64",
+        shape=num.shape,
+        check="at-least-one",
+        owner=owner,
+        field=f"{name}_den",
+    )
+    orders = [Fraction(int(a), int(b)) for a, b in zip(num, den, strict=True)]
+    repeated = sorted({str(x) for x in orders if orders.count(x) > 1})
+    if repeated:
+        raise FieldValueError(owner, f"{name}_num", "distinct orders", f"repeated {repeated}")
+    return num, den, orders
+
+
 def check_plan(
     levels_n: Any, orders_num: Any, orders_den: Any, force_targets: Any
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -223,23 +246,9 @@ def check_plan(
     )
     if levels.size == 0:
         raise FieldValueError(o, "levels", "at least one level", "shape (0,)")
-    num = check_array(
-        orders_num, dtype="int64", shape=(None,), check="at-least-one", owner=o, field="orders_num"
-    )
+    num, den, _ = _check_orders(orders_num, orders_den, "orders", o)
     if num.size == 0:
         raise FieldValueError(o, "orders_num", "at least one order", "shape (0,)")
-    den = check_array(
-        orders_den,
-        dtype="int64",
-        shape=num.shape,
-        check="at-least-one",
-        owner=o,
-        field="orders_den",
-    )
-    orders = [Fraction(int(a), int(b)) for a, b in zip(num, den, strict=True)]
-    repeated = sorted({str(x) for x in orders if orders.count(x) > 1})
-    if repeated:
-        raise FieldValueError(o, "orders_num", "distinct orders", f"repeated {repeated}")
     targets = check_array(
         force_targets,
         dtype="complex128",
@@ -276,27 +285,8 @@ def check_extra_orders(
     o = "stepped-sine plan"
     if np.size(extra_orders_num) == 0 and np.size(extra_orders_den) == 0:
         extra_orders_num = extra_orders_den = np.zeros(0, np.int64)
-    num = check_array(
-        extra_orders_num,
-        dtype="int64",
-        shape=(None,),
-        check="at-least-one",
-        owner=o,
-        field="extra_orders_num",
-    )
-    den = check_array(
-        extra_orders_den,
-        dtype="int64",
-        shape=num.shape,
-        check="at-least-one",
-        owner=o,
-        field="extra_orders_den",
-    )
-    extra = [Fraction(int(a), int(b)) for a, b in zip(num, den, strict=True)]
+    num, den, extra = _check_orders(extra_orders_num, extra_orders_den, "extra_orders", o)
     orders = {Fraction(int(a), int(b)) for a, b in zip(orders_num, orders_den, strict=True)}
-    repeated = sorted({str(x) for x in extra if extra.count(x) > 1})
-    if repeated:
-        raise FieldValueError(o, "extra_orders_num", "distinct orders", f"repeated {repeated}")
     shared = sorted(str(x) for x in set(extra) & orders)
     if shared:
         raise FieldValueError(
