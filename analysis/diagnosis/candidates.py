@@ -75,6 +75,21 @@ class Location:
     def slug(self) -> str:
         return re.sub(r"[^a-z0-9]+", "_", self.name.lower()).strip("_")
 
+    @property
+    def kind(self) -> str:
+        """``"point"`` (a measured point), ``"joint"``, ``"group"`` (elements at unmeasured
+        DOFs sharing one law, such as the mounts) or ``"structure"`` (a linear parameter)."""
+        if self.joint is not None:
+            return "joint"
+        if self.point is not None:
+            return "point"
+        return "group" if self.incidences else "structure"
+
+    @property
+    def unmeasured(self) -> bool:
+        """Acts at DOFs no sensor measures (a joint or a group)."""
+        return self.kind in ("joint", "group")
+
 
 @dataclass(frozen=True)
 class Law:

@@ -129,11 +129,7 @@ def _law_key(c: Candidate) -> tuple:
 
 
 def _location_class(c: Candidate) -> str:
-    if c.location.joint is not None:
-        return "joint"
-    if c.location.point is not None:
-        return "point"
-    return "group" if c.location.incidences else "structure"
+    return c.location.kind
 
 
 _LINEAR_KINDS = ("mass", "linear_spring", "joint_spring", "parameter")
@@ -149,15 +145,16 @@ def _shortlist(
 ):
     """Screened candidates to verify, in two stages.
 
-    First: the best ``n_verify`` distinct laws, the best also at its second location
-    (neighbouring points tie in a screen); and at each location class of unmeasured DOFs (a
-    group of springs such as the mounts, a joint), where a screen reads the states less well
-    than at a measured point and cannot tell look-alike laws apart, once refined by the
-    screen's alternations: the best of its two leading candidates, the best law's candidate
-    there, and the best candidate of a law family the evidence points at, each if it gains
-    at least ``class_share`` of the best candidate's BIC gain. Then, only if none of those
-    explains the misfit: the next two laws, and the best candidate of each law family the
-    evidence points at a measured point.
+    First: the best law, also at its second location (neighbouring points tie in a screen);
+    then the picks at each location class of unmeasured DOFs (a group of springs such as the
+    mounts, a joint), where a screen's first pass reads the states less well than at a
+    measured point and cannot tell look-alike laws apart: every candidate there is refined by
+    the screen's alternations (a first pass can score the true law there worse than the model
+    itself), and the best of them, the best law's candidate there and the best candidate of a
+    law family the evidence points at are picked, each if it gains at least ``class_share`` of
+    the best candidate's BIC gain (best first); then the next laws, up to ``n_verify``
+    distinct ones. Second, only if none of those explains the misfit: the next two laws, and
+    the best candidate of each law family the evidence points at a measured point.
     """
     nonlinear = [f for f in fits if f.candidate.law.kind not in _LINEAR_KINDS]
     first: list[ScreenFit] = []
@@ -168,11 +165,13 @@ def _shortlist(
             first.append(f)
             if len(laws) >= n_verify:
                 break
+    n_lead = min(1, len(first))
     if first:
         lead = first[0].candidate
         same = [f for f in nonlinear if f.candidate.law == lead.law
                 and f.candidate.location != lead.location]  # fmt: skip
         first[1:1] = same[:1]
+        n_lead += len(same[:1])
     kinds = [k for fam in evidence.families for k in FAMILIES.get(fam, ())]
     lead = first[0].candidate.law if first else None
 
@@ -180,14 +179,9 @@ def _shortlist(
         return -np.inf if f is None else baseline_bic - f.bic
 
     best_gain = max((screen_gain(f) for f in nonlinear[:1]), default=np.inf)
+    classes: list[ScreenFit] = []
     for where in ("group", "joint"):
-        here = [f for f in nonlinear if _location_class(f.candidate) == where]
-        same = next((f for f in here if f.candidate.law == lead), None)
-        family = next((f for f in here if f.candidate.law.kind in kinds), None)
-        refined: list[ScreenFit] = []
-        for f in [*here[:2], same, family]:
-            if f is not None and all(f.candidate != g.candidate for g in refined):
-                refined.append(screen.refined(f))
+        refined = [screen.refined(f) for f in nonlinear if _location_class(f.candidate) == where]
         by_bic = sorted(refined, key=lambda f: f.bic)
         picks = by_bic[:1] + [
             next((f for f in refined if f.candidate.law == lead), None),
@@ -197,8 +191,9 @@ def _shortlist(
             # only where the class explains a fair share of what the best candidate does
             gain = screen_gain(f)
             if (f is not None and gain >= class_share * best_gain
-                    and all(f.candidate != g.candidate for g in first)):  # fmt: skip
-                first.append(f)
+                    and all(f.candidate != g.candidate for g in first + classes)):  # fmt: skip
+                classes.append(f)
+    first[n_lead:n_lead] = sorted(classes, key=lambda f: f.bic)
     second: list[ScreenFit] = []
     for f in nonlinear:
         if len(second) >= 2:
@@ -322,8 +317,9 @@ def diagnose(
         first, second = _shortlist(screen, fits, evidence, st.n_verify, baseline.bic)
         linear_first = _linear_shortlist(lin_base, lin_fits, st)
         # the best law at its two best locations, the linear test's candidates and the next
-        # law first; the other picks (unmeasured locations) are dropped once a verified
-        # candidate is at the noise or the stage's processor time is spent
+        # pick (at an unmeasured location, else the next law) first; the other picks are
+        # dropped once a verified candidate is at the noise or the stage's processor time is
+        # spent
         n_lead = min(2, len(first))
         origin: list = [*first[:n_lead], *linear_first, *first[n_lead:]]
         essential = len(origin) - len(first) + min(3, len(first))

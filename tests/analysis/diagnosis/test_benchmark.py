@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from fractions import Fraction
 
-from benchmarks.diagnose import TRUE_EFFECTS, benchmark_plan, cache_dir
+import pytest
+
+from benchmarks.diagnose import TRUE_EFFECTS, benchmark_plan, cache_dir, record_blocks
 
 
 def test_the_plan_is_the_papers_with_the_force_held_clean() -> None:
@@ -14,6 +16,7 @@ def test_the_plan_is_the_papers_with_the_force_held_clean() -> None:
     assert ex.relative_amplitudes[:3] == (1.0, 0.02, 0.02)
     assert all(a == 0.0 for a in ex.relative_amplitudes[3:])
     assert ex.levels_n == (2.0, 4.0, 6.0, 8.0) and plan.points == (3, 6, 7)
+    assert plan.acquisition.record_blocks == 48  # the paper plan's
     quick = benchmark_plan(quick=True)
     assert quick.excitation.levels_n == (2.0, 5.0, 8.0) and quick.name != plan.name
 
@@ -29,3 +32,14 @@ def test_every_hidden_effect_names_a_library_candidate(
         assert effect in labels, truth
     monkeypatch.setenv("CLEARANCE_RIG_CACHE", str(tmp_path))
     assert cache_dir() == tmp_path
+
+
+def test_longer_records_are_a_setting(monkeypatch) -> None:
+    monkeypatch.delenv("CLEARANCE_RIG_RECORD_BLOCKS", raising=False)
+    assert record_blocks() is None
+    monkeypatch.setenv("CLEARANCE_RIG_RECORD_BLOCKS", "192")
+    assert record_blocks() == 192
+    assert benchmark_plan(blocks=192).acquisition.record_blocks == 192
+    monkeypatch.setenv("CLEARANCE_RIG_RECORD_BLOCKS", "many")
+    with pytest.raises(ValueError, match="CLEARANCE_RIG_RECORD_BLOCKS.*'many'"):
+        record_blocks()
