@@ -569,11 +569,14 @@ class Screen:
         return self.refine(fits, n_refine, progress)
 
     def first_pass(self, candidates: Sequence[Candidate], progress=None) -> list[ScreenFit]:
-        """One pass of every candidate at the data's states, best first."""
+        """One pass of every candidate at the data's states, best first. At DOFs no sensor
+        measures (a group, a joint) the data's states are read coarsely, and a pass there can
+        score the true law worse than the model itself: those fits are refined at once."""
         fits = []
         for i, c in enumerate(candidates):
             try:
-                fits.append(self.fit(c, n_iterations=0))
+                f = self.fit(c, n_iterations=0)
+                fits.append(self.refined(f) if c.location.unmeasured else f)
             except (ValueError, np.linalg.LinAlgError) as exc:
                 log.warning("screen of %s failed: %s", c.label, exc)
             if progress:
