@@ -136,6 +136,7 @@ _LINEAR_KINDS = ("mass", "linear_spring", "joint_spring", "parameter")
 
 
 def _shortlist(
+    screen: Screen,
     fits: list[ScreenFit],
     evidence: Evidence,
     n_verify: int,
@@ -146,14 +147,14 @@ def _shortlist(
 
     First: the best law, also at its second location (neighbouring points tie in a screen);
     then the picks at each location class of unmeasured DOFs (a group of springs such as the
-    mounts, a joint), where a screen reads the states less well than at a measured point and
-    cannot tell look-alike laws apart (every fit there refined by the screen's alternations:
-    :meth:`~analysis.diagnosis.screen.Screen.first_pass`): the best of them, the best law's
-    candidate there and the best candidate of a law family the evidence points at, each if it
-    gains at least ``class_share`` of the best candidate's BIC gain (best first); then the
-    next laws, up to ``n_verify`` distinct ones. Second, only if none of those explains the
-    misfit: the next two laws, and the best candidate of each law family the evidence points
-    at a measured point.
+    mounts, a joint), where a screen's first pass reads the states less well than at a
+    measured point and cannot tell look-alike laws apart: every candidate there is refined by
+    the screen's alternations (a first pass can score the true law there worse than the model
+    itself), and the best of them, the best law's candidate there and the best candidate of a
+    law family the evidence points at are picked, each if it gains at least ``class_share`` of
+    the best candidate's BIC gain (best first); then the next laws, up to ``n_verify``
+    distinct ones. Second, only if none of those explains the misfit: the next two laws, and
+    the best candidate of each law family the evidence points at a measured point.
     """
     nonlinear = [f for f in fits if f.candidate.law.kind not in _LINEAR_KINDS]
     first: list[ScreenFit] = []
@@ -180,10 +181,10 @@ def _shortlist(
     best_gain = max((screen_gain(f) for f in nonlinear[:1]), default=np.inf)
     classes: list[ScreenFit] = []
     for where in ("group", "joint"):
-        here = [f for f in nonlinear if _location_class(f.candidate) == where]
-        by_bic = sorted(here, key=lambda f: f.bic)
+        refined = [screen.refined(f) for f in nonlinear if _location_class(f.candidate) == where]
+        by_bic = sorted(refined, key=lambda f: f.bic)
         picks = by_bic[:1] + [
-            next((f for f in here if f.candidate.law == lead), None),
+            next((f for f in refined if f.candidate.law == lead), None),
             next((f for f in by_bic if f.candidate.law.kind in kinds), None),
         ]
         for f in picks:
@@ -313,7 +314,7 @@ def diagnose(
             timings["total_s"] = time.perf_counter() - t0
             return result
         t2 = time.perf_counter()
-        first, second = _shortlist(fits, evidence, st.n_verify, baseline.bic)
+        first, second = _shortlist(screen, fits, evidence, st.n_verify, baseline.bic)
         linear_first = _linear_shortlist(lin_base, lin_fits, st)
         # the best law at its two best locations, the linear test's candidates and the next
         # pick (at an unmeasured location, else the next law) first; the other picks are

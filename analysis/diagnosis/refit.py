@@ -231,7 +231,6 @@ def refit(
     *,
     rows: np.ndarray | None = None,
     starts: Sequence[Mapping[str, float]] = (),
-    fallback_starts: Sequence[Mapping[str, float]] = (),
     distributions: Mapping[str, Distribution] | None = None,
     n_random_starts: int = 0,
     n_lm_starts: int = 1,
@@ -258,9 +257,6 @@ def refit(
         Steps fitted (default: all). Steps where the start model does not converge are left out.
     starts : sequence of mapping
         Further start values (missing names keep the model's value).
-    fallback_starts : sequence of mapping
-        Start values tried only when the model's own start scores a chi-square per degree
-        of freedom above ``give_up_chi2`` (always when that is None).
     distributions : mapping name -> Distribution, optional
         With ``n_random_starts``: Latin hypercube starts (the paper's method).
     n_lm_starts : int
@@ -302,17 +298,12 @@ def refit(
     space = obj.space
     p0 = np.array([_current(model, n) for n in names])
     candidates = [p0]
-    lo, hi = space.theta_bounds()
-    if fallback_starts:
-        r0, _ = obj(np.clip(space.to_theta(p0), lo, hi), False)
-        chi0 = float(r0 @ r0) / max(r0.size - space.size, 1)
-        if give_up_chi2 is None or not np.isfinite(chi0) or chi0 > give_up_chi2:
-            starts = [*starts, *fallback_starts]
     for s in starts:
         candidates.append(np.array([float(s.get(n, v)) for n, v in zip(names, p0, strict=True)]))
     if n_random_starts:
         dists = dict(distributions or {})
         candidates += list(latin_hypercube(dists, n_random_starts, seed, names))
+    lo, hi = space.theta_bounds()
     thetas = np.clip(np.array([space.to_theta(c) for c in candidates]), lo, hi)
     costs = []
     if len(thetas) == 1:

@@ -569,14 +569,11 @@ class Screen:
         return self.refine(fits, n_refine, progress)
 
     def first_pass(self, candidates: Sequence[Candidate], progress=None) -> list[ScreenFit]:
-        """One pass of every candidate at the data's states, best first. At DOFs no sensor
-        measures (a group, a joint) the data's states are read coarsely, and a pass there can
-        score the true law worse than the model itself: those fits are refined at once."""
+        """One pass of every candidate at the data's states, best first."""
         fits = []
         for i, c in enumerate(candidates):
             try:
-                f = self.fit(c, n_iterations=0)
-                fits.append(self.refined(f) if c.location.unmeasured else f)
+                fits.append(self.fit(c, n_iterations=0))
             except (ValueError, np.linalg.LinAlgError) as exc:
                 log.warning("screen of %s failed: %s", c.label, exc)
             if progress:

@@ -207,10 +207,9 @@ def _linear_recalibration(model: Model, run: str, names: list[str]):
 
 
 #: Factors applied to the screen's coefficients of a candidate at unmeasured DOFs for further
-#: starts, tried when the screen's start does worse than the model without the candidate: a
-#: screen reads the states there coarsely, and a stiff law started at twice its value can put
-#: the balance on another branch (the hardening mounts' k3 screened at 1.9 times the truth's
-#: scores 172 x noise there, at half that 4.4).
+#: starts: a screen reads the states there coarsely, and a stiff law started at twice its
+#: value can put the balance on another branch (the hardening mounts' k3 screened at 1.9 times
+#: the truth's scores 170 x noise there, at half that 4.4).
 UNMEASURED_START_FACTORS = (0.5, 2.0)
 
 
@@ -283,8 +282,7 @@ def _verify(job: VerifyJob, t0: float) -> Verified:
     message = ""
     try:
         r = refit(
-            m2, data, names, rows=rows if rows.size else None,
-            fallback_starts=_scaled_starts(job, m2),
+            m2, data, names, rows=rows if rows.size else None, starts=_scaled_starts(job, m2),
             distributions=dists, n_random_starts=job.n_starts, seed=job.seed,
             max_iterations=job.max_iterations, ftol=1e-4, n_harmonics=job.n_harmonics,
             n_time=job.n_time, max_seconds=job.max_seconds, give_up_chi2=job.give_up_chi2,
