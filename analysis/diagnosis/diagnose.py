@@ -128,10 +128,6 @@ def _law_key(c: Candidate) -> tuple:
     return (c.law.kind, c.law.options.get("side"))
 
 
-def _location_class(c: Candidate) -> str:
-    return c.location.kind
-
-
 _LINEAR_KINDS = ("mass", "linear_spring", "joint_spring", "parameter")
 
 
@@ -181,7 +177,7 @@ def _shortlist(
     best_gain = max((screen_gain(f) for f in nonlinear[:1]), default=np.inf)
     classes: list[ScreenFit] = []
     for where in ("group", "joint"):
-        refined = [screen.refined(f) for f in nonlinear if _location_class(f.candidate) == where]
+        refined = [screen.refined(f) for f in nonlinear if f.candidate.location.kind == where]
         by_bic = sorted(refined, key=lambda f: f.bic)
         picks = by_bic[:1] + [
             next((f for f in refined if f.candidate.law == lead), None),
@@ -204,7 +200,7 @@ def _shortlist(
     for fam in evidence.families:
         fam_kinds = FAMILIES.get(fam, ())
         best = next((f for f in nonlinear if f.candidate.law.kind in fam_kinds
-                     and _location_class(f.candidate) == "point"), None)  # fmt: skip
+                     and f.candidate.location.kind == "point"), None)  # fmt: skip
         if best is not None and all(best.candidate != g.candidate for g in first + second):
             second.append(best)
     return first, second[:4]

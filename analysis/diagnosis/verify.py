@@ -209,7 +209,7 @@ def _linear_recalibration(model: Model, run: str, names: list[str]):
 #: Factors applied to the screen's coefficients of a candidate at unmeasured DOFs for further
 #: starts: a screen reads the states there coarsely, and a stiff law started at twice its
 #: value can put the balance on another branch (the hardening mounts' k3 screened at 1.9 times
-#: the truth's scores 170 x noise there, at half that 4.4).
+#: the truth's scores 172 x noise there, at half that 4.4).
 UNMEASURED_START_FACTORS = (0.5, 2.0)
 
 
