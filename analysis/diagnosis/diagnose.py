@@ -292,6 +292,11 @@ def diagnose(
         fits = screen.refine(fits, st.n_refine, progress)
         timings["screen_s"] = time.perf_counter() - t1
         say("screened", {"n": len(fits), "seconds": timings["screen_s"]})
+        # the short list (its refinements at unmeasured DOFs) while the workers finish the
+        # recalibration and the linear test
+        t2 = time.perf_counter()
+        first, second = _shortlist(screen, fits, evidence, st.n_verify, baseline.bic)
+        timings["shortlist_s"] = time.perf_counter() - t2
         lin_base, lin_fits = None, []
         if lin_jobs:
             done = [j.result() for j in lin_jobs]
@@ -310,7 +315,6 @@ def diagnose(
             timings["total_s"] = time.perf_counter() - t0
             return result
         t2 = time.perf_counter()
-        first, second = _shortlist(screen, fits, evidence, st.n_verify, baseline.bic)
         linear_first = _linear_shortlist(lin_base, lin_fits, st)
         # the best law at its two best locations, the linear test's candidates and the next
         # pick (at an unmeasured location, else the next law) first; the other picks are

@@ -16,7 +16,7 @@ parameters follow from the same formula.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -30,6 +30,7 @@ class _SupportedBlock:
     from_drive: object
     drive: object
     stiffness: float
+    _static: tuple | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -60,11 +61,15 @@ class _SupportedBlock:
         return dH
 
     def _static_terms(self) -> tuple[np.ndarray, np.ndarray, float]:
-        zero = np.zeros(1)
-        a = self.to_drive(zero)[0]  # (rows, 1)
-        b = self.from_drive(zero)[0]  # (1, cols)
-        hdd = float(self.drive(zero)[0, 0, 0].real)
-        return a, b, hdd
+        # the blocks' receptances are fixed (a model with other values has other blocks), so
+        # the static terms are evaluated once: every balance evaluates its blocks at order 0
+        if self._static is None:
+            zero = np.zeros(1)
+            a = self.to_drive(zero)[0]  # (rows, 1)
+            b = self.from_drive(zero)[0]  # (1, cols)
+            hdd = float(self.drive(zero)[0, 0, 0].real)
+            self._static = a, b, hdd
+        return self._static
 
 
 class StaticSupport:

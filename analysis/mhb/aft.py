@@ -22,19 +22,23 @@ from analysis.mhb.harmonics import HarmonicBasis
 __all__ = ["element_forces", "nonlinear_forces", "parameter_forces"]
 
 
-def _rows(b: HarmonicBasis, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Basis rows and their first and second tau-derivatives, each shape (n, 2H+1)."""
-    k = np.arange(1, b.n_harmonics + 1)
-    kt = np.outer(np.atleast_1d(tau), k)
+def _rows(b: HarmonicBasis, tau: np.ndarray, second: bool = True):
+    """Basis rows and their first (and second) tau-derivatives, each shape (n, 2H+1)."""
+    k = np.arange(1.0, b.n_harmonics + 1)
+    kt = np.multiply.outer(np.atleast_1d(tau), k)
     c, s = np.cos(kt), np.sin(kt)
     n = kt.shape[0]
     e = np.empty((n, b.size))
-    de = np.zeros((n, b.size))
-    dde = np.zeros((n, b.size))
-    e[:, 0] = 1.0
+    de = np.empty((n, b.size))
+    e[:, 0], de[:, 0] = 1.0, 0.0
     e[:, 1::2], e[:, 2::2] = c, s
-    de[:, 1::2], de[:, 2::2] = -k * s, k * c
-    dde[:, 1::2], dde[:, 2::2] = -(k**2) * c, -(k**2) * s
+    ks, kc = k * s, k * c
+    de[:, 1::2], de[:, 2::2] = -ks, kc
+    if not second:
+        return e, de, None
+    dde = np.empty((n, b.size))
+    dde[:, 0] = 0.0
+    dde[:, 1::2], dde[:, 2::2] = -k * kc, -k * ks
     return e, de, dde
 
 
@@ -51,16 +55,19 @@ def _crossings(b: HarmonicBasis, Ue: np.ndarray, u_t: np.ndarray, u_s: float):
     Returns the sample index before each crossing, shape (n_c,), and the phase, shape (n_c,).
     """
     g = u_t - u_s
-    nxt = np.roll(g, -1)
-    idx = np.flatnonzero((g > 0) != (nxt > 0))
+    above = g > 0
+    change = np.empty(above.size, bool)
+    np.not_equal(above[:-1], above[1:], out=change[:-1])
+    change[-1] = above[-1] != above[0]
+    idx = np.flatnonzero(change)
     dtau = 2 * np.pi / b.n_time
     if idx.size == 0:
         return idx, np.zeros(0)
-    g0, g1 = g[idx], nxt[idx]
+    g0, g1 = g[idx], g[(idx + 1) % g.size]
     lo = b.tau[idx]
     t = lo + dtau * g0 / (g0 - g1)
     for _ in range(1):  # Newton on u(tau) - u_s from the chord: error O(dtau^4)
-        e, de, _ = _rows(b, t)
+        e, de, _ = _rows(b, t, second=False)
         d = de @ Ue
         ok = d != 0
         t = np.where(ok, t - (e @ Ue - u_s) / np.where(ok, d, 1.0), t)

@@ -24,6 +24,7 @@ The split of the FRFs into calibration and validation sets is
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import logging
 import time
 from collections.abc import Sequence
@@ -35,7 +36,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from analysis.calibration.linear.damping_equalization import equalize
-from analysis.calibration.linear.modal_id import identify_modes
+from analysis.calibration.linear.modal_id import ModalFit, identify_modes
 from analysis.calibration.linear.mode_matching import match_modes, renumber_modes
 from analysis.calibration.linear.objective import EqualizedFRFObjective, receptance
 from analysis.calibration.linear.result import LinearCalibration
@@ -233,9 +234,7 @@ def calibrate_linear(
     names = _parameter_names(model, st.parameters)
     space = ParameterSpace.from_model(model_s, names)
     f, H, sH, g2, band = _band(run_frfs, st)
-    # Weighted by the H1 standard errors (starting poles by the coherence): the noisy lines
-    # away from the resonances must not pull the poles.
-    fit = identify_modes(f, H, band, weights=1.0 / np.maximum(sH, 1e-300), start_weights=g2)
+    fit = _identify(f, H, band, sH, g2)
     n_min = len(names) if st.min_modes is None else st.min_modes
     if fit.n_modes < n_min:
         raise CalibrationError(
@@ -317,6 +316,28 @@ def calibrate_linear(
 
 
 # -- helpers ------------------------------------------------------------------------------
+_IDENTIFIED: dict[bytes, ModalFit] = {}
+_N_IDENTIFIED = 8
+
+
+def _identify(f, H, band, sH, g2) -> ModalFit:
+    """The run's modes (weighted by the H1 standard errors, starting poles by the coherence:
+    the noisy lines away from the resonances must not pull the poles), remembered by their
+    inputs: a diagnosis recalibrates dozens of candidate models on one run, and the modes of
+    the measurement do not depend on the model (a :class:`ModalFit` is read-only)."""
+    h = hashlib.sha1()
+    for a in (f, H, sH, g2, np.asarray(band, dtype=float)):
+        h.update(np.ascontiguousarray(a).tobytes())
+    key = h.digest()
+    if key not in _IDENTIFIED:
+        if len(_IDENTIFIED) >= _N_IDENTIFIED:
+            _IDENTIFIED.pop(next(iter(_IDENTIFIED)))
+        _IDENTIFIED[key] = identify_modes(
+            f, H, band, weights=1.0 / np.maximum(sH, 1e-300), start_weights=g2
+        )
+    return _IDENTIFIED[key]
+
+
 def _continuation(make_objective, zetas, x0, bounds, st):
     """Solve stage by stage over ``zetas``; the last stage's solution and every stage's record."""
     x, stages, sol = x0, [], None
