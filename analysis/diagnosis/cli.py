@@ -71,7 +71,7 @@ def cmd_compare(args) -> dict:
     """Residual blocks of a model against a file; figures with ``--figures``."""
     model, data = _model(args), _stepped(args.run)
     pred = BranchMatchedPredictor(model, data, n_harmonics=args.harmonics, n_time=args.samples)
-    cmp = compare(model, data, predictor=pred)
+    cmp = compare(model, data, predictor=pred, sigma=args.sigma)
     if args.figures:
         from analysis.report.diagnosis_figures import (
             plot_frequency_level_map,
@@ -163,6 +163,9 @@ def add_parsers(subparsers) -> None:
     sp = subparsers.add_parser("compare", help="residual maps of a model against a file")
     common(sp)
     sp.add_argument("--top", type=int, default=8, help="failing blocks listed")
+    sp.add_argument("--sigma", choices=("model", "file"), default="model",
+                    help="standard errors: the force's carried through the model (default) "
+                    "or the file's first-order FRF errors")  # fmt: skip
     sp.set_defaults(func=cmd_compare)
 
     sp = subparsers.add_parser("diagnose", help="which physical effect the model misses")
