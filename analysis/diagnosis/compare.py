@@ -2,12 +2,12 @@
 
 Residuals ``r = (H_model - H_meas) / sigma`` (sigma: the FRF's complex standard error from the
 file's phasor uncertainties, the force's carried through the model) are grouped into blocks by
-sensor, order, level and frequency band. Each block gets a chi-square with two degrees of freedom per complex value (each part has half the complex
-variance) and a verdict: "consistent with the noise" when its p-value is at least
-``alpha / n_blocks`` (a family-wise level ``alpha`` over all blocks, Bonferroni), "fails here"
-otherwise, with the numbers. Neighbouring frequency steps are not independent in a
-real test (a model error is smooth in frequency), so a failing block is evidence of a model error
-while a passing one bounds it.
+sensor, order, level and frequency band. Each block gets a chi-square with two degrees of
+freedom per complex value (each part has half the complex variance) and a verdict: "consistent
+with the noise" when its p-value is at least ``alpha / n_blocks`` (a family-wise level
+``alpha`` over all blocks, Bonferroni), "fails here" otherwise, with the numbers. Neighbouring
+frequency steps are not independent in a real test (a model error is smooth in frequency), so
+a failing block is evidence of a model error while a passing one bounds it.
 """
 
 from __future__ import annotations
