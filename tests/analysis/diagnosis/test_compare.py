@@ -77,3 +77,21 @@ def test_standard_errors_through_the_model(runs, reference_model) -> None:
     # where the structure is linear the model's tangent is the receptance: the file's value
     assert np.allclose(ratio, 1.0, rtol=0.02)
     assert np.all(sigma > 0) and np.all(np.isfinite(sigma))
+
+
+def test_compare_scores_with_the_standard_errors_through_the_model(runs, reference_model) -> None:
+    data = runs("reference")
+    pred = BranchMatchedPredictor(reference_model, data)
+    H, file_sigma = pred.measured()
+    p, sigma = pred.predict_with_sigma()
+    by_default = compare(reference_model, data, predictor=pred)
+    ok = ~np.isin(np.arange(data.n_steps), by_default.left_out)
+    # the default divides by the model's standard errors (those a calibration fits with; at
+    # least the file's smallest) ...
+    floor = file_sigma[np.isfinite(file_sigma) & (file_sigma > 0)].min()
+    expected = (p.frf - H) / np.maximum(sigma, floor)
+    assert np.allclose(by_default.residual[ok], expected[ok], rtol=1e-9)
+    # ... and differs from the file's first-order errors where the contact acts
+    by_file = compare(reference_model, data, predictor=pred, sigma="file")
+    assert np.allclose(by_file.residual[ok], ((p.frf - H) / file_sigma)[ok], rtol=1e-9)
+    assert not np.allclose(by_default.residual[ok], by_file.residual[ok], rtol=1e-3)
