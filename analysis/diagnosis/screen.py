@@ -42,6 +42,7 @@ Proc. R. Soc. A 473 (2017) 20170009.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import logging
 import math
 from collections.abc import Callable, Sequence
@@ -116,6 +117,8 @@ class ScreenFit:
         Law parameters (and ``k_joint`` of a released joint) in model units.
     known : dict
         The model's own element parameters refitted at the same states.
+    refined : bool
+        Already through :meth:`Screen.refined` (refining it again gives the same fit).
     """
 
     candidate: Candidate
@@ -126,6 +129,7 @@ class ScreenFit:
     aicc: float
     values: dict[str, float] = field(default_factory=dict)
     known: dict[str, float] = field(default_factory=dict)
+    refined: bool = False
 
     @property
     def chi2_per_dof(self) -> float:
@@ -592,13 +596,15 @@ class Screen:
 
     def refined(self, f: ScreenFit) -> ScreenFit:
         """``f`` with the alternations at its clearance, or ``f`` if that is no better."""
+        if f.refined:
+            return f
         fixed = {p: f.values[p] for p in f.candidate.law.nonlinear if p in f.values}
         try:
             g = self.fit(f.candidate, nonlinear=fixed)
         except (ValueError, np.linalg.LinAlgError) as exc:
             log.warning("screen of %s failed: %s", f.candidate.label, exc)
             return f
-        return g if g.bic < f.bic else f
+        return dataclasses.replace(g if g.bic < f.bic else f, refined=True)
 
     # -- one fit ------------------------------------------------------------------------------
     def _parts(self, fr: _Frame, cand: Candidate | None, B_loc, values: dict):
