@@ -57,8 +57,9 @@ class AugmentResult:
     parameters : dict
         Every recalibrated parameter (model units).
     history : list of dict
-        The error by iteration: ``stage`` ("start", "linear", "lm"), ``iteration``,
-        ``chi2_per_dof`` (on the fitted steps) and ``parameters``.
+        The error by iteration: ``stage`` ("model", "linear", "lm", then "reweighted" for
+        the fits with the weights recomputed at the last one's values), ``iteration``,
+        ``chi2_per_dof`` (on the fitted steps, with that fit's weights) and ``parameters``.
     calibration_levels_n : tuple of float
         Levels fitted (the rest validate).
     linear : dict or None
@@ -110,7 +111,7 @@ class AugmentResult:
             "error history (chi2/dof on the fitted steps):",
         ]
         for h in self.history:
-            lines.append(f"  {h['stage']:>6} {h['iteration']:3d}  {h['chi2_per_dof']:.4g}")
+            lines.append(f"  {h['stage']:>10} {h['iteration']:3d}  {h['chi2_per_dof']:.4g}")
         if self.path is not None:
             lines.append(f"model written to {self.path}")
         return "\n".join(lines)
@@ -153,6 +154,7 @@ def augment(
     validation_level_n: float | None = None,
     n_starts: int = 0,
     max_iterations: int = 30,
+    reweight_passes: int = 1,
     seed: int = 0,
     out: str | Path | None = None,
     progress: Callable[[str, dict], None] | None = None,
@@ -178,6 +180,12 @@ def augment(
     n_starts : int
         Latin hypercube starts besides the given (or the screen's) values.
     max_iterations : int
+    reweight_passes : int
+        Fits again from the fitted values with the steps' weights (the force's error through
+        the model) recomputed there, keeping the fit that scores best with its own weights
+        (:func:`~analysis.diagnosis.refit.refit`): the first fit weighs the steps by the
+        tangents of the model with the candidate's start values, which near a jump can be far
+        from the fitted model's.
     seed : int
     out : path, optional
         Write the augmented model there (a new file).
@@ -244,8 +252,9 @@ def augment(
         n_random_starts=n_starts,
         n_lm_starts=2 if n_starts else 1, seed=seed, max_iterations=max_iterations,
         progress=report, n_harmonics=n_harmonics, n_time=n_time,
+        reweight_passes=reweight_passes,
     )  # fmt: skip
-    history += [{"stage": "lm", **h} for h in r.history]
+    history += [{"stage": "reweighted" if h.get("pass") else "lm", **h} for h in r.history]
     after = compare(r.model, data, predictor=_predictor(r.model, data, n_harmonics, n_time))
     params = {**(linear_info["parameters"] if linear_info else {}), **r.parameters}
     result = AugmentResult(candidate, r.model, before, after, params, history, levels,

@@ -133,8 +133,8 @@ def cmd_augment(args) -> dict:
         values, known = best.start_values()
         show("chosen", {"candidate": cand.label})
     result = augment(model, data, cand, values=values, known=known, linear_run=args.linear_run,
-                     n_starts=args.starts, out=args.out, progress=show,
-                     n_harmonics=args.harmonics, n_time=args.samples)  # fmt: skip
+                     n_starts=args.starts, reweight_passes=args.reweight, out=args.out,
+                     progress=show, n_harmonics=args.harmonics, n_time=args.samples)  # fmt: skip
     if args.figures:
         from analysis.report.diagnosis_figures import plot_before_after, plot_error_history
 
@@ -181,6 +181,13 @@ def add_parsers(subparsers) -> None:
     sp.add_argument("--candidate", help="candidate label (default: the diagnosis' best)")
     sp.add_argument("--linear-run", help="random-excitation test (for a linear effect)")
     sp.add_argument("--starts", type=int, default=0, help="further Latin hypercube starts")
+    sp.add_argument(
+        "--reweight",
+        type=int,
+        default=1,
+        metavar="N",
+        help="fits again with the weights at the fitted values (default 1)",
+    )
     sp.add_argument("--workers", type=int, default=2, help="processes for verifications")
     sp.set_defaults(func=cmd_augment)
 

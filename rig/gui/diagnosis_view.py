@@ -207,7 +207,7 @@ class DiagnosisView(QtWidgets.QWidget):
             f"noise ({result.residual_drop:.3g}-fold drop); per level after: {levels}<br>"
             f"parameters: {_parameters(result.parameters)}"
         )
-        hist = [h for h in result.history if h.get("stage") == "lm"]
+        hist = [h for h in result.history if h.get("stage") in ("lm", "reweighted")]
         if hist:
             it = np.array([h["iteration"] for h in hist], dtype=float)
             chi2 = np.array([h["chi2_per_dof"] for h in hist])
