@@ -289,60 +289,16 @@ def refit(
     -------
     Refit
     """
-    fit = _fit(model, data, parameters, rows=rows, starts=starts, distributions=distributions,
-               n_random_starts=n_random_starts, n_lm_starts=n_lm_starts, seed=seed,
-               max_iterations=max_iterations, ftol=ftol, n_harmonics=n_harmonics,
-               n_time=n_time, progress=progress, max_seconds=max_seconds,
-               give_up_chi2=give_up_chi2)  # fmt: skip
-    if not reweight_passes:
-        return fit
-    t0 = time.perf_counter() - fit.seconds
-    fits, own = [fit], []
-    for k in range(1, reweight_passes + 2):
-        # one start, the last fit's values: its first metric is the last fit's own one
-        last = k > reweight_passes
-        try:
-            nxt = _fit(fits[-1].model, data, parameters, rows=rows, n_harmonics=n_harmonics,
-                       n_time=n_time, ftol=ftol, max_iterations=0 if last else max_iterations,
-                       progress=progress, max_seconds=max_seconds)  # fmt: skip
-        except (RuntimeError, ValueError) as exc:  # the fitted model fails on a fitted step
-            log.info("reweighting stopped after pass %d: %s", k - 1, exc)
-            own.append(np.inf)
-            break
-        own.append(2 * nxt.start_costs[0] / max(nxt.n_residuals - len(nxt.parameters), 1))
-        if last:
-            break
-        fits.append(nxt)
-    kept = int(np.argmin(own))
-    history, offset = [], 0
-    for k, f in enumerate(fits[: kept + 1]):
-        history += [{**h, "iteration": h["iteration"] + offset, "pass": k} for h in f.history]
-        offset = history[-1]["iteration"]
-    log.info("reweighted fits: own chi2/dof %s, kept pass %d", own, kept)
-    return dataclasses.replace(fits[kept], history=history, start_costs=fit.start_costs,
-                               seconds=time.perf_counter() - t0)  # fmt: skip
-
-
-def _fit(
-    model: Model,
-    data: SteppedSineData,
-    parameters: Sequence[str],
-    *,
-    rows: np.ndarray | None = None,
-    starts: Sequence[Mapping[str, float]] = (),
-    distributions: Mapping[str, Distribution] | None = None,
-    n_random_starts: int = 0,
-    n_lm_starts: int = 1,
-    seed: int = 0,
-    max_iterations: int = 30,
-    ftol: float = 1e-6,
-    n_harmonics: int = 9,
-    n_time: int = 128,
-    progress: Callable[[str, dict], None] | None = None,
-    max_seconds: float | None = None,
-    give_up_chi2: float | None = None,
-) -> Refit:
-    """One fit of :func:`refit` (weights from the start model)."""
+    if reweight_passes:
+        first = refit(model, data, parameters, rows=rows, starts=starts,
+                      distributions=distributions, n_random_starts=n_random_starts,
+                      n_lm_starts=n_lm_starts, seed=seed, max_iterations=max_iterations,
+                      ftol=ftol, n_harmonics=n_harmonics, n_time=n_time, progress=progress,
+                      max_seconds=max_seconds, give_up_chi2=give_up_chi2)  # fmt: skip
+        again = functools.partial(refit, data=data, parameters=parameters, rows=rows, ftol=ftol,
+                                  n_harmonics=n_harmonics, n_time=n_time, progress=progress,
+                                  max_seconds=max_seconds)  # fmt: skip
+        return _reweighted(first, again, reweight_passes, max_iterations)
     t0 = time.perf_counter()
     names = tuple(parameters)
     rows = np.arange(data.n_steps) if rows is None else np.asarray(rows)
@@ -426,3 +382,31 @@ def _fit(
         lm=best,
         seconds=time.perf_counter() - t0,
     )
+
+
+def _reweighted(fit: Refit, again: Callable[..., Refit], passes: int, max_iterations: int) -> Refit:
+    """:func:`refit`'s further passes after ``fit``: ``again(model, max_iterations=...)`` fits
+    from the model's values with the weights recomputed there."""
+    t0 = time.perf_counter() - fit.seconds
+    fits, own = [fit], []
+    for k in range(1, passes + 2):
+        # one start, the last fit's values: its first metric is the last fit's own one
+        last = k > passes
+        try:
+            nxt = again(fits[-1].model, max_iterations=0 if last else max_iterations)
+        except (RuntimeError, ValueError) as exc:  # the fitted model fails on a fitted step
+            log.info("reweighting stopped after pass %d: %s", k - 1, exc)
+            own.append(np.inf)
+            break
+        own.append(2 * nxt.start_costs[0] / max(nxt.n_residuals - len(nxt.parameters), 1))
+        if last:
+            break
+        fits.append(nxt)
+    kept = int(np.argmin(own))
+    history, offset = [], 0
+    for k, f in enumerate(fits[: kept + 1]):
+        history += [{**h, "iteration": h["iteration"] + offset, "pass": k} for h in f.history]
+        offset = history[-1]["iteration"]
+    log.info("reweighted fits: own chi2/dof %s, kept pass %d", own, kept)
+    return dataclasses.replace(fits[kept], history=history, start_costs=fit.start_costs,
+                               seconds=time.perf_counter() - t0)  # fmt: skip
