@@ -9,8 +9,10 @@
 2. **Evidence**: the signature tests (:mod:`analysis.diagnosis.signatures`), in words.
 3. In parallel: the model's **own parameters recalibrated** on the stepped sine (the baseline
    every candidate must beat; if it reaches the noise the model was only mis-calibrated and
-   nothing is claimed), each **linear candidate** (mass, spring, compliant joint) on the
-   linear test with the linear parameters recalibrated
+   nothing is claimed; if it brings the residual to ``rescreen_ratio`` of the calibrated
+   model's or below, the calibration was a poor start and the screen runs again from the
+   recalibrated model, which the verifications then start from), each **linear candidate**
+   (mass, spring, compliant joint) on the linear test with the linear parameters recalibrated
    (:mod:`analysis.diagnosis.linear_screen`), and the **screen** of every law of the element
    library at every plausible location by the harmonic-domain force estimate
    (:mod:`analysis.diagnosis.screen`), ranked by BIC.
@@ -118,6 +120,12 @@ class _Later:
         if self._future is not None:
             return self._future.result()
         return self._fn(self._job)
+
+
+def _screen_from(model: Model, data, st: DiagnosisSettings, pred=None) -> Screen:
+    pred = pred or BranchMatchedPredictor(model, data, n_harmonics=st.n_harmonics,
+                                          n_time=st.n_time)  # fmt: skip
+    return Screen(model, data, predictor=pred)
 
 
 def _best_rms(done: list[Verified]) -> float:
@@ -286,7 +294,7 @@ def diagnose(
             lin = [c for c in cands if c.law.kind in ("mass", "linear_spring", "joint_spring")]
             lin_jobs = [_Later(ex, run_linear_job, LinearJob(text, source, str(linear_run), c))
                         for c in [None, *lin]]  # fmt: skip
-        screen = Screen(model, data, predictor=pred)
+        screen = _screen_from(model, data, st, pred)
         baseline = screen.baseline()
         fits = screen.first_pass(mine, progress) + (share.result() if theirs else [])
         fits = screen.refine(fits, st.n_refine, progress)
@@ -314,6 +322,20 @@ def diagnose(
         if refit.rms_over_noise() <= st.adequate_rms:
             timings["total_s"] = time.perf_counter() - t0
             return result
+        if not refit.failed and refit.rms_over_noise() <= st.rescreen_ratio * cmp.rms_over_noise:
+            # the calibration's values were a poor start (a missing effect can pull the
+            # model's own parameters into a far minimum), and a screen reads the states
+            # through the model's own elements: screen again from the recalibrated model,
+            # which every verification below then starts from (verify_job reads ``text``)
+            t3 = time.perf_counter()
+            say("rescreen", {"rms_over_noise": refit.rms_over_noise()})
+            text = refit.model_toml
+            screen = _screen_from(Model.from_toml_text(text, source), data, st)
+            baseline = screen.baseline()
+            fits = screen.run(nonlinear, st.n_refine, progress, ex)
+            first, second = _shortlist(screen, fits, evidence, st.n_verify, baseline.bic)
+            result.screen, result.baseline, result.rescreened = fits, baseline, True
+            timings["rescreen_s"] = time.perf_counter() - t3
         t2 = time.perf_counter()
         linear_first = _linear_shortlist(lin_base, lin_fits, st)
         # the best law at its two best locations, the linear test's candidates and the next

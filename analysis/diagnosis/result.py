@@ -62,6 +62,11 @@ class DiagnosisSettings:
         Further starts are tried only for a best candidate that brought the residual of the
         recalibrated model down to this fraction or below (a strong effect stuck in a local
         minimum), not for one that explains little.
+    rescreen_ratio : float
+        When recalibrating the model's own parameters brings its residual to this fraction of
+        the calibrated model's or below, the calibration was a poor start (a missing effect
+        can pull it into a far minimum): the screen runs again from the recalibrated model,
+        and the verifications start from there (0: never).
     """
 
     adequate_rms: float = 1.5
@@ -81,6 +86,7 @@ class DiagnosisSettings:
     n_time: int = 128
     time_budget_s: float = 40.0
     restart_fraction: float = 0.2
+    rescreen_ratio: float = 0.5
 
     def __post_init__(self) -> None:
         if self.adequate_rms <= 0 or self.explained_rms <= 0 or self.tie_bic < 0:
@@ -168,6 +174,9 @@ class Diagnosis:
     recommendation : dict or None
         For a group: the measurement that separates its members best.
     timings : dict of str to float, s
+    rescreened : bool
+        The screen ran from the model with its own parameters recalibrated (see
+        :attr:`DiagnosisSettings.rescreen_ratio`); ``screen`` and ``baseline`` are that run's.
     """
 
     verdict: str
@@ -182,6 +191,7 @@ class Diagnosis:
     recommendation: dict | None = None
     timings: dict[str, float] = field(default_factory=dict)
     settings: DiagnosisSettings = field(default_factory=DiagnosisSettings)
+    rescreened: bool = False
 
     @property
     def group(self) -> list[RankedCandidate]:
@@ -241,7 +251,9 @@ class Diagnosis:
                     + ", ".join(f"{k} {v:.4g}" for k, v in f.values.items())
                 )
         if self.baseline is not None and self.screen:
-            lines.append(f"screen ({len(self.screen)} candidates; delta BIC against the model):")
+            against = ("the model with its own parameters recalibrated" if self.rescreened
+                       else "the model")  # fmt: skip
+            lines.append(f"screen ({len(self.screen)} candidates; delta BIC against {against}):")
             for f in self.screen[:n]:
                 lines.append(
                     f"  {f.bic - self.baseline.bic:10.1f}  {f.candidate.label}  "
@@ -298,6 +310,7 @@ class Diagnosis:
                  f.chi2_per_dof, "values": f.values, "known": f.known}
                 for f in self.screen[:30]
             ],
+            "rescreened": self.rescreened,
             "ranking": [r.to_json() for r in self.ranking],
             "group": [r.candidate.label for r in self.group],
             "recommendation": self.recommendation,

@@ -120,6 +120,28 @@ def test_friction_in_the_clamp_is_found_in_the_clamp(runs, reference_model, tmp_
 
 
 @pytest.mark.slow
+def test_a_calibration_pulled_far_away_is_screened_again_from_the_recalibrated_model(
+    runs, reference_model
+) -> None:
+    data = runs("clamp_friction")
+    # the missing friction pulled the contact's calibration far away (the stop barely
+    # engaged, as a 96-period run of the benchmark calibrates it); read through that contact,
+    # the screen ranks the clamp's friction low
+    far = reference_model.with_values({"k_c": 6e6, "gap": 1.3e-3})
+    cands = _subset(reference_model, ("joint clamp rz", "point 5"),
+                    ("coulomb_friction", "linear_damper"))  # fmt: skip
+    result = diagnose(far, data, candidates=cands, settings=QUICK)
+    ratio = result.refit_rms / result.comparison.rms_over_noise
+    assert ratio <= QUICK.rescreen_ratio and result.rescreened, (ratio, result.summary())
+    assert "against the model with its own parameters recalibrated" in result.summary()
+    assert result.to_json()["rescreened"] is True
+    assert result.verdict == "explained", result.summary()
+    assert result.rank_of("coulomb_friction", "joint clamp rz") == 1
+    params = result.group[0].verified.parameters
+    assert abs(params["f_slip_coulomb_friction_joint_clamp_rz"] / 3.0 - 1) < 0.05
+
+
+@pytest.mark.slow
 def test_an_effect_outside_the_library_is_reported_unexplained(runs, reference_model) -> None:
     data = runs("hysteretic_joint")
     cands = _subset(reference_model, ("joint clamp rz",),
