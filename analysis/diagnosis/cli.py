@@ -91,7 +91,8 @@ def cmd_compare(args) -> dict:
 
 def _settings(args) -> DiagnosisSettings:
     return DiagnosisSettings(workers=args.workers, n_starts=args.starts,
-                             n_harmonics=args.harmonics, n_time=args.samples)  # fmt: skip
+                             n_harmonics=args.harmonics, n_time=args.samples,
+                             rescreen_ratio=args.rescreen_ratio)  # fmt: skip
 
 
 def cmd_diagnose(args) -> dict:
@@ -168,11 +169,21 @@ def add_parsers(subparsers) -> None:
                     "or the file's first-order FRF errors")  # fmt: skip
     sp.set_defaults(func=cmd_compare)
 
+    def rescreen(sp) -> None:
+        sp.add_argument(
+            "--rescreen-ratio", type=float, default=DiagnosisSettings.rescreen_ratio,
+            metavar="R",
+            help="screen again from the model with its own parameters recalibrated when that "
+            f"brings the residual to R of the model's or below (default "
+            f"{DiagnosisSettings.rescreen_ratio}; 0: never)",
+        )  # fmt: skip
+
     sp = subparsers.add_parser("diagnose", help="which physical effect the model misses")
     common(sp)
     sp.add_argument("--linear-run", help="random-excitation test (for linear candidates)")
     sp.add_argument("--starts", type=int, default=4, help="extra starts for strong effects")
     sp.add_argument("--workers", type=int, default=2, help="processes for verifications")
+    rescreen(sp)
     sp.set_defaults(func=cmd_diagnose)
 
     sp = subparsers.add_parser("augment", help="add an effect, recalibrate, compare")
@@ -189,6 +200,7 @@ def add_parsers(subparsers) -> None:
         help="fits again with the weights at the fitted values (default 1)",
     )
     sp.add_argument("--workers", type=int, default=2, help="processes for verifications")
+    rescreen(sp)
     sp.set_defaults(func=cmd_augment)
 
 

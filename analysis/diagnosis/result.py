@@ -93,6 +93,10 @@ class DiagnosisSettings:
             raise ValueError("DiagnosisSettings: thresholds must be positive")
         if self.n_verify < 1 or self.workers < 1 or self.verify_iterations < 1:
             raise ValueError("DiagnosisSettings: n_verify, workers, iterations must be >= 1")
+        if not 0 <= self.rescreen_ratio < 1:
+            raise ValueError(
+                f"DiagnosisSettings.rescreen_ratio: must be in [0, 1), got {self.rescreen_ratio}"
+            )
 
 
 @dataclass

@@ -5,8 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 
+import pytest
+
 from analysis.diagnosis import BranchMatchedPredictor, compare
-from analysis.diagnosis.cli import add_parsers
+from analysis.diagnosis.cli import _settings, add_parsers
 from analysis.report.diagnosis_figures import (
     plot_before_after,
     plot_error_history,
@@ -44,6 +46,19 @@ def test_compare_and_diagnose_commands(runs, reference_model, tmp_path, capsys) 
                       "--figures", str(tmp_path / "fig")], capsys)  # fmt: skip
     assert "chi2/dof" in text.out and out["rms_over_noise"] < 1.3
     assert (tmp_path / "fig" / "residual_sensor_order_level.png").exists()
-    out, text = _run(["diagnose", str(data.path), "--model", str(model_path), "--json"], capsys)
+    out, text = _run(["diagnose", str(data.path), "--model", str(model_path), "--json",
+                      "--rescreen-ratio", "0.4"], capsys)  # fmt: skip
     assert out["verdict"] == "adequate"
     json.dumps(out)
+
+
+def test_the_rescreen_ratio_reaches_the_settings_and_a_bad_one_is_refused() -> None:
+    parser = argparse.ArgumentParser()
+    add_parsers(parser.add_subparsers(dest="cmd"))
+    args = parser.parse_args(["diagnose", "run.h5", "--model", "m.toml", "--rescreen-ratio", "0"])
+    assert _settings(args).rescreen_ratio == 0.0
+    args = parser.parse_args(["augment", "run.h5", "--model", "m.toml", "--out", "a.toml"])
+    assert _settings(args).rescreen_ratio == 0.5
+    args.rescreen_ratio = 1.0
+    with pytest.raises(ValueError, match="rescreen_ratio: must be in"):
+        _settings(args)
