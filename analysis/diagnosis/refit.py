@@ -290,14 +290,12 @@ def refit(
     Refit
     """
     if reweight_passes:
-        first = refit(model, data, parameters, rows=rows, starts=starts,
-                      distributions=distributions, n_random_starts=n_random_starts,
-                      n_lm_starts=n_lm_starts, seed=seed, max_iterations=max_iterations,
-                      ftol=ftol, n_harmonics=n_harmonics, n_time=n_time, progress=progress,
-                      max_seconds=max_seconds, give_up_chi2=give_up_chi2)  # fmt: skip
         again = functools.partial(refit, data=data, parameters=parameters, rows=rows, ftol=ftol,
                                   n_harmonics=n_harmonics, n_time=n_time, progress=progress,
                                   max_seconds=max_seconds)  # fmt: skip
+        first = again(model, starts=starts, distributions=distributions,
+                      n_random_starts=n_random_starts, n_lm_starts=n_lm_starts, seed=seed,
+                      max_iterations=max_iterations, give_up_chi2=give_up_chi2)  # fmt: skip
         return _reweighted(first, again, reweight_passes, max_iterations)
     t0 = time.perf_counter()
     names = tuple(parameters)
