@@ -10,6 +10,14 @@ standard errors although the model is right, and it dominates any comparison or 
 over the steps that misfit, once more in the reverse order (continuation from the far side,
 which follows the other branch back to its fold); each step then takes the solution closer to
 the measurement. Derivatives are those of the chosen solution, so calibrations stay exact.
+
+A rig under force control is driven by a voltage, not by a force: the shaker's impedance can
+hold the structure on the part of a force-driven branch that lies past its fold (the branch
+that turns back), where a model driven by the recorded force is unstable. A step that misfits
+just before a measured jump is therefore also solved there: the branch at that step's force is
+continued from the previous step's solution through the fold and back to the step's frequency
+(:func:`~analysis.mhb.continuation.continue_branch`), and the fold partner is taken if it
+fits better.
 """
 
 from __future__ import annotations
@@ -18,7 +26,9 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from analysis.mhb.continuation import ContinuationSettings, continue_branch
 from analysis.mhb.sensitivity import point_sensitivities
+from analysis.mhb.solver import solve_point
 from analysis.mhb.sweep import solve_steps
 from analysis.predict import Prediction, SteppedSinePredictor, needed_rows, sweeps_of
 from analysis.system import build_problem_dofs
@@ -33,6 +43,22 @@ SUSPECT_RELATIVE = 0.1
 #: Sub-step halvings tried on a step that fails from its neighbour (the other branch is tried
 #: anyway, from the far side).
 MAX_SUBSTEP_DEPTH = 2
+#: A measured jump: the fundamental of some channel changes by this share from one step to the
+#: next. The last steps before one (:data:`FOLD_STEPS`) that misfit are solved past the fold too.
+JUMP_RELATIVE = 0.3
+FOLD_STEPS = 2
+#: The local continuation around a fold (it ends once back at the step's frequency), over at
+#: most this share of the frequency past the step.
+FOLD_WINDOW = 0.01
+FOLD_SEARCH = ContinuationSettings(ds=0.005, ds_max=0.02, max_points=80, stability=False)
+
+
+def _jumps(fundamental: np.ndarray) -> np.ndarray:
+    """Positions ``k`` where some channel's fundamental FRF (steps, channels) changes by more
+    than :data:`JUMP_RELATIVE` from step ``k`` to ``k + 1``."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        change = np.abs(np.diff(fundamental, axis=0)) / np.abs(fundamental[:-1])
+    return np.flatnonzero(np.nan_to_num(change, nan=0.0).max(axis=1) > JUMP_RELATIVE)
 
 
 class BranchMatchedPredictor(SteppedSinePredictor):
@@ -140,16 +166,20 @@ class BranchMatchedPredictor(SteppedSinePredictor):
             w = 2 * np.pi * d.frequency_hz[sweep]
             points = solve_steps(pb, w, F, max_substep_depth=MAX_SUBSTEP_DEPTH).points
             chosen = list(points)
+            frfs = [
+                self.frf_of(r, p)[0] if p.converged else None
+                for r, p in zip(sweep, points, strict=True)
+            ]
             fits = np.array(
                 [
-                    self._step_misfit(self.frf_of(r, p)[0], r) if p.converged else np.inf
-                    for r, p in zip(sweep, points, strict=True)
+                    np.inf if f is None else self._step_misfit(f, r)
+                    for r, f in zip(sweep, frfs, strict=True)
                 ]
             )
             rel = np.array(
                 [
-                    self._step_relative(self.frf_of(r, p)[0], r) if p.converged else np.inf
-                    for r, p in zip(sweep, points, strict=True)
+                    np.inf if f is None else self._step_relative(f, r)
+                    for r, f in zip(sweep, frfs, strict=True)
                 ]
             )
             bad = np.flatnonzero((fits > SUSPECT_SIGMA) & (rel > SUSPECT_RELATIVE))
@@ -165,8 +195,53 @@ class BranchMatchedPredictor(SteppedSinePredictor):
                         fit = self._step_misfit(self.frf_of(sweep[j], p)[0], sweep[j])
                         if fit < fits[j]:
                             chosen[j], fits[j] = p, fit
+            if self.match_branches:
+                for j in self._before_jumps(sweep, frfs, fits):
+                    for p in self._fold_partners(pb, points[j].X, w[j], w[j - 1], F[j]):
+                        fit = self._step_misfit(self.frf_of(sweep[j], p)[0], sweep[j])
+                        if fit < fits[j]:
+                            chosen[j], fits[j] = p, fit
             out.update(zip(sweep.tolist(), chosen, strict=True))
         return pb, out
+
+    def _before_jumps(self, sweep: np.ndarray, frfs: list, fits: np.ndarray) -> list[int]:
+        """Positions in ``sweep`` (not the first) of misfitting steps at most
+        :data:`FOLD_STEPS` before a measured jump after which the model's forward solution
+        jumps too (its fold lies just past the step: the only place a fold partner is near).
+
+        ``frfs`` are the forward solutions' FRFs (None where not converged)."""
+        nan = np.full(self._H.shape[1], np.nan, complex)
+        model = np.array([nan if f is None else f[:, 0] for f in frfs])
+        measured = _jumps(self._H[sweep, :, 0])
+        folds = set(_jumps(model).tolist())
+        near = {j for k in measured for j in range(k - FOLD_STEPS + 1, k + 1) if j >= 1}
+        return sorted(j for j in near & folds if fits[j] > SUSPECT_SIGMA)
+
+    @staticmethod
+    def _fold_partners(pb, X: np.ndarray, w: float, w_prev: float, F: np.ndarray) -> list:
+        """Solutions at ``w`` on the far side of a fold just past the solution ``X`` there.
+
+        The branch at force ``F`` is continued from ``X`` away from ``w_prev`` for at most the
+        step from ``w_prev`` (and :data:`FOLD_WINDOW` of ``w``); if it folds back, it is
+        followed until it is back at ``w``, and every later crossing of ``w`` is solved there.
+        """
+        ahead = np.sign(w - w_prev) or 1.0
+        reach = min(abs(w - w_prev), FOLD_WINDOW * w)
+
+        def back_at_w(points, folds) -> bool:
+            return bool(folds) and (points[-1].omega - w) * ahead < 0
+
+        branch = continue_branch(pb, w, w + ahead * reach, F, FOLD_SEARCH, X0=X, until=back_at_w)
+        if not branch.folds:
+            return []
+        om = branch.omega
+        crossings = np.flatnonzero(np.diff(np.sign(om - w)) != 0)
+        out = []
+        for i in crossings[crossings >= max(branch.folds[0] - 1, 1)]:
+            p = solve_point(pb, w, F, X0=branch.points[i + 1].X)
+            if p.converged:
+                out.append(p)
+        return out
 
     def response_sigma(self, pb, points: dict) -> np.ndarray:
         """Standard errors of the FRF residuals with the force's error through the model.

@@ -13,6 +13,7 @@ E. L. Allgower, K. Georg, *Introduction to Numerical Continuation Methods*, SIAM
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -111,6 +112,9 @@ def continue_branch(
     force: np.ndarray,
     settings: ContinuationSettings | None = None,
     newton: NewtonSettings | None = None,
+    *,
+    X0: np.ndarray | None = None,
+    until: Callable[[list[MHBPoint], list[int]], bool] | None = None,
 ) -> Branch:
     """Continue the periodic solution from ``omega_start`` until ``omega_end``.
 
@@ -121,6 +125,13 @@ def continue_branch(
         Angular frequencies [rad/s]; either direction.
     force : ndarray, shape (n_orders, n_f), complex
         Fixed force phasors [N].
+    settings, newton : optional
+    X0 : ndarray, shape (2H+1, n_nl), optional
+        Start of the first point's Newton solve (default the linear response): a solution
+        already known nearby puts the branch on that solution's branch.
+    until : callable, optional
+        ``until(points, folds)`` is asked after each accepted point; True ends the branch
+        there (message "stopped by the caller").
 
     Returns
     -------
@@ -128,7 +139,7 @@ def continue_branch(
     """
     st = settings or ContinuationSettings()
     nt = newton or NewtonSettings()
-    first = solve_point(problem, omega_start, force, settings=nt)
+    first = solve_point(problem, omega_start, force, X0=X0, settings=nt)
     if not first.converged:
         return Branch([first], None, [], f"no solution at the start: {first.message}")
     sysm = _System(problem, force)
@@ -212,6 +223,9 @@ def continue_branch(
         y, t = yc, t_new
         ds = min(ds * (1.5 if its <= 4 else 1.0), st.ds_max)
         if (w - omega_end) * direction >= 0:
+            break
+        if until is not None and until(pts, folds):
+            message = "stopped by the caller"
             break
     else:
         message = "maximum number of points"
