@@ -14,8 +14,9 @@ the measurement. Derivatives are those of the chosen solution, so calibrations s
 A rig under force control is driven by a voltage, not by a force: the shaker's impedance can
 hold the structure on the part of a force-driven branch that lies past its fold (the branch
 that turns back), where a model driven by the recorded force is unstable. A step that misfits
-just before a measured jump is therefore also solved there: the branch at that step's force is
-continued from the previous step's solution through the fold and back to the step's frequency
+just before a measured jump, where the model's forward solution jumps too, is therefore also
+solved there: the branch at that step's force is continued from the step's forward solution
+through the fold and back to the step's frequency
 (:func:`~analysis.mhb.continuation.continue_branch`), and the fold partner is taken if it
 fits better.
 """
@@ -192,17 +193,19 @@ class BranchMatchedPredictor(SteppedSinePredictor):
                 ).points
                 for j, p in zip(seg, back, strict=True):
                     if p.converged:
-                        fit = self._step_misfit(self.frf_of(sweep[j], p)[0], sweep[j])
-                        if fit < fits[j]:
-                            chosen[j], fits[j] = p, fit
+                        self._keep_better(sweep[j], p, j, chosen, fits)
             if self.match_branches:
                 for j in self._before_jumps(sweep, frfs, fits):
                     for p in self._fold_partners(pb, points[j].X, w[j], w[j - 1], F[j]):
-                        fit = self._step_misfit(self.frf_of(sweep[j], p)[0], sweep[j])
-                        if fit < fits[j]:
-                            chosen[j], fits[j] = p, fit
+                        self._keep_better(sweep[j], p, j, chosen, fits)
             out.update(zip(sweep.tolist(), chosen, strict=True))
         return pb, out
+
+    def _keep_better(self, row: int, p, j: int, chosen: list, fits: np.ndarray) -> None:
+        """Take solution ``p`` at position ``j`` (file step ``row``) if it fits better."""
+        fit = self._step_misfit(self.frf_of(row, p)[0], row)
+        if fit < fits[j]:
+            chosen[j], fits[j] = p, fit
 
     def _before_jumps(self, sweep: np.ndarray, frfs: list, fits: np.ndarray) -> list[int]:
         """Positions in ``sweep`` (not the first) of misfitting steps at most
