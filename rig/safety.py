@@ -12,7 +12,9 @@
   was (``SILENT_DROP``) (fault ``sensor``; on the drive-force channel, one measurement at the
   noise level: ``no-force``); a live sensor that responds weakly (an antiresonance, a low
   level) stays where it was from step to step, a dead one drops to its noise;
-  and a waveform flat-topped at both peaks, the mark of a saturated sensor (``clipping``).
+  and a waveform flat-topped at both peaks at a tenth of the channel's input range or more,
+  the mark of a saturated sensor (``clipping``; a structure's own symmetric flat tops, a
+  slipping joint's, sit far below a sensor's output swing).
 
 Process-level safety: :func:`deferred_interrupts` holds Ctrl-C while the output ramps down or a
 step is written; :func:`interrupt_handlers` turns Ctrl-C and SIGTERM into a clean abort of a
@@ -50,6 +52,10 @@ SILENT_SNR = 3.0  # a fundamental below this many noise standard errors is "no r
 SILENT_STRIKES = 2  # consecutive silent measurements before a channel counts as dead
 SILENT_DROP = 0.2  # ... and only if its response per newton fell below this share of before
 PLATEAU_RATIO = 1.8  # flat at both peaks this many times longer than a sine: saturated
+#: ... at a level of at least this share of the channel's input range: a sensor saturates at its
+#: output swing, which the input range is set to hold; a symmetric flat top far below it is the
+#: structure's own motion (a joint that slips, a stop on either side), not a saturated sensor
+PLATEAU_MIN_RANGE = 0.1
 _PLATEAU_HARMONICS = 20  # harmonics of the base kept to denoise the period average
 
 
@@ -398,9 +404,11 @@ class SignalChecks:
         for c, ch in enumerate(self.channels):
             if ch.quantity == "voltage":
                 continue
+            level = 0.5 * float(np.ptp(smooth[:, c]))
+            if level < PLATEAU_MIN_RANGE * ch.range_units:
+                continue
             ratio = plateau_fraction(smooth[:, c], float(np.nan_to_num(residual[c])))
             if ratio > PLATEAU_RATIO:
-                level = 0.5 * float(np.ptp(smooth[:, c]))
                 raise RunFault(
                     "clipping",
                     f"{_describe(ch)} is flat-topped at about +-{level:.3g} {ch.unit} "

@@ -108,8 +108,17 @@ def test_disconnected_sensor_is_named_by_the_pretest(tmp_path):
     assert "acc7" not in data.exit_message and "does not respond" in data.exit_message
 
 
+def _sensitive_tip(setup, mv_per_g: float):
+    """``setup`` with the tip's accelerometer ``mv_per_g`` sensitive (its +-5 V input range
+    then holds +-5000 / mv_per_g g)."""
+    chans = tuple(dataclasses.replace(c, sensitivity=mv_per_g) if c.name == "acc7" else c
+                  for c in setup.channels)  # fmt: skip
+    return dataclasses.replace(setup, channels=chans)
+
+
 def test_saturated_sensor_is_reported_as_clipping(tmp_path):
-    setup = setup_at()
+    # a 1000 mV/g accelerometer at the tip: 12 m/s^2 is 1.2 V of its 5 V input range
+    setup = _sensitive_tip(setup_at(), 1000.0)
     plan = reduced_plan(levels_n=(8.0,), ranges=((21.0, 24.0, 3.0),))
     daq = sim_daq(setup, record_output=True)
     # at 24 Hz and 8 N the tip's acceleration is about 25 m/s^2; its sensor now stops at 12
@@ -120,6 +129,21 @@ def test_saturated_sensor_is_reported_as_clipping(tmp_path):
     assert summary.fault_kind == "clipping"
     _ended(tmp_path / "c.h5", "aborted", "'acc7' (point 7", "flat-topped", "saturates", steps=1)
     assert_ramped_to_zero(daq)
+
+
+def test_a_flat_top_far_below_the_input_range_is_the_structure_not_a_saturated_sensor(tmp_path):
+    # the same cut-off at 12 m/s^2 on the shipped 10 mV/g sensor is 0.12 V of its 5 V range
+    # (2.4 %): no sensor's output swing ends there, so it is the structure's own flat top (a
+    # joint that slips on both sides) and the run goes on
+    setup = setup_at()
+    plan = reduced_plan(levels_n=(8.0,), ranges=((21.0, 24.0, 3.0),))
+    daq = sim_daq(setup, record_output=True)
+    clip = _after_step(1, lambda: daq.set_faults(FaultSwitches(clip_levels={"acc7": 12.0})))
+    summary, run, daq = run_on_sim(
+        plan, tmp_path / "c.h5", setup=setup, daq=daq, subscribers=[clip]
+    )
+    assert summary.status == "success", summary.message
+    assert read_measurement(tmp_path / "c.h5").n_steps == 2
 
 
 def test_channel_beyond_its_input_range(tmp_path):
