@@ -29,7 +29,8 @@ def _added(result, model, data, tmp_path, linear_run=None):
     assert out.exists() and model.source != str(out)  # a new file, the old model kept
     assert added.residual_drop >= 5.0 and added.after.rms_over_noise <= 1.5, added.summary()
     stages = [h["stage"] for h in added.history]
-    assert stages[0] == "model" and stages[-1] in ("lm", "reweighted")
+    assert stages[0] == "model" and stages[-1] in ("lm", "reweighted", "finer balance")
+    assert added.balance["refined"] == (stages[-1] == "finer balance")
     if "reweighted" in stages:  # the reweighted fit kept: it follows the first
         assert stages.index("reweighted") > stages.index("lm")
     assert added.history[-1]["chi2_per_dof"] < added.history[0]["chi2_per_dof"]
