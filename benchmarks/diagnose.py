@@ -12,7 +12,8 @@ noise of every phasor: a misfit is judged against the noise, and the weakest hid
 the mounts' hardening, misfits the paper-way calibration by only 4.2 x noise at 48 periods).
 The linear random test is :func:`linear_run`. Runs are made once and kept in a
 cache folder (``$CLEARANCE_RIG_CACHE``, default ``~/.cache/clearance-rig/diagnose``), keyed by
-the truth file, the plan and the seed; making them is timed apart (``data_s``) and not part of
+the truth file, the plan, the seed and the code that makes them (the simulated rig's and the
+rig's engine's sources); making them is timed apart (``data_s``) and not part of
 ``total_s``.
 
 Then the nominal model is calibrated the paper's way (linear parameters with damping
@@ -133,6 +134,19 @@ def _key(*parts: str) -> str:
     return h.hexdigest()[:12]
 
 
+def _code_version() -> str:
+    """A digest of the code that makes the simulated runs (the simulated rig and the rig's
+    engine): a run cached by other code is made again, not reused."""
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for folder in ("sim_backend", "rig"):
+        for f in sorted((root / folder).rglob("*.py")):
+            if "gui" not in f.parts and "service" not in f.parts:
+                h.update(f.relative_to(root).as_posix().encode())
+                h.update(f.read_bytes())
+    return h.hexdigest()
+
+
 def stepped_run(truth: str, folder: Path, *, quick: bool = False, seed: int = 0):
     """The stepped-sine run of ``truth`` on the simulated rig (made once, then cached).
 
@@ -147,7 +161,8 @@ def stepped_run(truth: str, folder: Path, *, quick: bool = False, seed: int = 0)
 
     plan = benchmark_plan(quick, record_blocks())
     text = (TRUTH_DIR / f"{truth}.toml").read_text()
-    path = folder / f"{truth}-{_key(text, json.dumps(plan.to_dict(), default=str), str(seed))}.h5"
+    key = _key(text, json.dumps(plan.to_dict(), default=str), str(seed), _code_version())
+    path = folder / f"{truth}-{key}.h5"
     if path.exists():
         try:
             if read_measurement(path).complete:
