@@ -154,8 +154,8 @@ def _shortlist(
     mounts, a joint), where a screen's first pass reads the states less well than at a
     measured point and cannot tell look-alike laws apart: every candidate there is refined by
     the screen's alternations (a first pass can score the true law there worse than the model
-    itself), and the best of them, the best law's candidate there and the best candidate of a
-    law family the evidence points at are picked, each if it gains at least ``class_share`` of
+    itself), and the best of them, the best law's candidate there and the best candidate of
+    each law family the evidence points at are picked, each if it gains at least ``class_share`` of
     the best candidate's BIC gain (best first); then the next laws, up to ``n_verify``
     distinct ones. Second, only if none of those explains the misfit: the next two laws, and
     the best candidate of each law family the evidence points at a measured point.
@@ -176,7 +176,6 @@ def _shortlist(
                 and f.candidate.location != lead.location]  # fmt: skip
         first[1:1] = same[:1]
         n_lead += len(same[:1])
-    kinds = [k for fam in evidence.families for k in FAMILIES.get(fam, ())]
     lead = first[0].candidate.law if first else None
 
     def screen_gain(f) -> float:
@@ -187,10 +186,13 @@ def _shortlist(
     for where in ("group", "joint"):
         refined = [screen.refined(f) for f in nonlinear if f.candidate.location.kind == where]
         by_bic = sorted(refined, key=lambda f: f.bic)
-        picks = by_bic[:1] + [
-            next((f for f in refined if f.candidate.law == lead), None),
-            next((f for f in by_bic if f.candidate.law.kind in kinds), None),
-        ]
+        picks = by_bic[:1] + [next((f for f in refined if f.candidate.law == lead), None)]
+        for fam in evidence.families:
+            # each family's best apart from the picks so far (a contact-like law in a joint
+            # can lead and belong to one family while the evidence also points at another)
+            kinds = FAMILIES.get(fam, ())
+            picks.append(next((f for f in by_bic if f.candidate.law.kind in kinds and all(
+                f.candidate != g.candidate for g in picks if g is not None)), None))  # fmt: skip
         for f in picks:
             # only where the class explains a fair share of what the best candidate does
             gain = screen_gain(f)
