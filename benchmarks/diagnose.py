@@ -33,6 +33,7 @@ diagnoses and augmentations); per truth the details (``details``) with the times
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import logging
@@ -134,6 +135,7 @@ def _key(*parts: str) -> str:
     return h.hexdigest()[:12]
 
 
+@functools.cache
 def _code_version() -> str:
     """A digest of the code that makes the simulated runs (the simulated rig and the rig's
     engine): a run cached by other code is made again, not reused."""

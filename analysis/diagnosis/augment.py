@@ -82,9 +82,9 @@ class AugmentResult:
     seconds : float
     balance : dict
         ``n_harmonics`` and ``n_time`` of the final balance (``before`` and ``after`` are
-        scored there) and ``truncation_over_noise``: the coarser balance's truncation at the
-        first fit's values (NaN when not checked), ``refined``: whether the fit went on at a
-        finer balance.
+        scored there), ``truncation_over_noise``: the truncation of the balance first fitted
+        (``checked_harmonics``, when checked) at the first fit's values (NaN when not
+        checked), ``refined``: whether the fit went on at a finer balance.
     """
 
     candidate: Candidate
@@ -130,9 +130,9 @@ class AugmentResult:
         ]
         b = self.balance
         if np.isfinite(b.get("truncation_over_noise", np.nan)):
-            first = b.get("checked_harmonics", b.get("n_harmonics"))
             lines.append(
-                f"balance: {first} harmonics truncate {b['truncation_over_noise']:.2g} x noise "
+                f"balance: {b['checked_harmonics']} harmonics truncate "
+                f"{b['truncation_over_noise']:.2g} x noise "
                 + (f"at the fitted values; fitted on at {b['n_harmonics']} harmonics"
                    if b.get("refined") else "(kept)")
             )  # fmt: skip
