@@ -161,7 +161,7 @@ class RunWarning(Event):
     """Something the operator should know; the run goes on.
 
     ``kind`` is a short tag (``"response-alarm"``, ``"not-settled"``, ``"not-converged"``,
-    ``"amplifier"``, ...); ``channel`` names the channel concerned, if one is.
+    ``"fold"``, ``"amplifier"``, ...); ``channel`` names the channel concerned, if one is.
     """
 
     kind: str

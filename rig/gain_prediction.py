@@ -8,7 +8,9 @@ predictor uses what the run has learnt:
 
 1. the same frequency at a lower level (the previous sweep over these frequencies) scaled by
    how the gain at the previous frequency changed between that level and this one:
-   ``G(f, L) = G(f, L') * G(f_prev, L) / G(f_prev, L')``;
+   ``G(f, L) = G(f, L') * G(f_prev, L) / G(f_prev, L')``, unless it differs from rule 2 by
+   more than ``BRANCH_JUMP_RATIO`` (the lower level's response jumped between the two
+   frequencies, off the fold of its resonance, while this sweep is still on its branch);
 2. otherwise an extrapolation along the sweep from the last two steps, in the logarithm of the
    complex gain (magnitude and phase), ``log G(f) = log G1 + r (log G1 - log G0)`` with
    ``r = (f - f1) / (f1 - f0)`` limited to [0, 1];
@@ -31,6 +33,8 @@ from rig.plans import PlannedStep
 __all__ = ["GainHistory"]
 
 _FREQ_KEY_DECIMALS = 6
+# rule 1 is dropped for the sweep's own extrapolation when the two differ by more than this factor
+BRANCH_JUMP_RATIO = 2.0
 
 
 @dataclass(frozen=True)
@@ -215,19 +219,28 @@ class GainHistory:
 
     def _fundamental(self, step: PlannedStep, prev: _Entry | None, same_f: _Entry | None, f: float):
         i1 = self.i1
+        along = None if prev is None else self._along_sweep(prev, f)
         if same_f is not None and prev is not None:
             ref = self._lower_level(step.level_index, step.sweep_direction, prev.frequency_hz)
             if ref is not None and ref.level_index == same_f.level_index:
-                return same_f.gain[i1] * prev.gain[i1] / ref.gain[i1]
+                scaled = same_f.gain[i1] * prev.gain[i1] / ref.gain[i1]
+                # the lower level's gain changed between the two frequencies by more than this
+                # sweep's own trend allows: its response jumped to another branch there (the
+                # fold of its resonance), which says nothing about this sweep's branch
+                if abs(np.log(abs(scaled / along))) <= np.log(BRANCH_JUMP_RATIO):
+                    return scaled
+                return along
         if same_f is not None:
             return same_f.gain[i1]
-        if prev is None:
-            return None
+        return along
+
+    def _along_sweep(self, prev: _Entry, f: float) -> np.ndarray:
+        """The fundamental's gain extrapolated along the sweep (rule 2, else rule 3)."""
         before = self._sweep_neighbour(prev)
         if before is not None:
             r = (f - prev.realised_hz) / (prev.realised_hz - before.realised_hz)
-            return _log_extrapolate(before.gain[i1], prev.gain[i1], min(max(r, 0.0), 1.0))
-        return prev.gain[i1]
+            return _log_extrapolate(before.gain[self.i1], prev.gain[self.i1], min(max(r, 0.0), 1.0))
+        return prev.gain[self.i1]
 
     def _sweep_neighbour(self, entry: _Entry | None) -> _Entry | None:
         """The step measured just before ``entry`` in the same sweep, if any."""

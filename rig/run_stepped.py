@@ -10,7 +10,10 @@ engine. For every planned step (levels in plan order, each swept over its freque
    control correction), average phase-synchronous blocks once the settling test passes, and
    hand the force phasors and their standard errors to the controller; repeat until the force
    is on target (within the controller's tolerances, or within ``uncertainty_factor``
-   standard errors of the target) or the controller stops;
+   standard errors of the target) or the controller stops. Near the fold of a nonlinear
+   resonance the force is not a monotonic function of the drive; where the iteration stalls on
+   a flat top or bottom of that curve with the target beyond it, control starts again from a
+   drive on the far side (a ``"fold"`` warning, :func:`_fold_probe`);
 4. the accepted drive's acquisition is extended to ``record_blocks`` blocks (no re-settling),
    and the step (realised frequency, phasors and standard errors of every channel, drive
    phasors, controller outcome) is written at once: ``WriteStep``.
@@ -55,6 +58,20 @@ logger = logging.getLogger(__name__)
 
 # control starts again when the latest error exceeds this and twice the best (restart_after)
 RESTART_ERROR = 0.1
+# a turning point of the force-drive curve: over the last restart_after measurements the error
+# did not halve and the fundamental force followed the drive with less than this fraction of
+# its own force per volt (flat or falling: past the peak of the force before a resonance)
+FOLD_SLOPE = 0.25
+# creeping: the drives of those measurements span at most this fraction of their mean (wider
+# is a wandering iteration, which the restart handles)
+FOLD_CREEP = 0.25
+# the probe below the fold drives at most this fraction of the drive at the fold
+FOLD_PROBE_RATIO = 0.5
+# force per volt, relative to the low-level gain, from which a flat top is the peak of the
+# rising part (the structure not yet in resonance) rather than the dip after it
+LOW_BRANCH_GAIN = 0.5
+# the probe beyond the dip multiplies the drive by this
+FOLD_JUMP = 2.0
 
 
 def stepped_sine_procedure(
@@ -190,7 +207,7 @@ def _run(plan: SteppedSinePlan, ctx: RunContext, completed: frozenset, initial_g
                 targets = plan.excitation.spec.force_targets(step.level_n)
                 start_drive = history.predict_drive(step, before, targets, f)
         record, final_gain = yield from _one_step(
-            plan, ctx, controller, step, start_gain, start_drive
+            plan, ctx, controller, step, start_gain, start_drive, loop_gain
         )
         history.add(step, record.drive, record.force, final_gain, record.frequency_hz)
 
@@ -202,8 +219,14 @@ def _one_step(
     step: PlannedStep,
     start_gain: np.ndarray,
     start_drive: np.ndarray | None = None,
+    low_gain: np.ndarray | None = None,
 ):
-    """Control, record and write one step; returns (StepRecord, final gain estimate)."""
+    """Control, record and write one step; returns (StepRecord, final gain estimate).
+
+    ``low_gain`` (H, H) is the drive-to-force gain at a low level (the loop check): where the
+    step stalls at a turning point of the force-drive curve, control starts again from the
+    drive it predicts, below the turning point (:func:`_fold_probe`).
+    """
     acq, policy = plan.acquisition, plan.control
     orders = plan.excitation.orders
     fi = ctx.drive_force_index
@@ -216,6 +239,7 @@ def _one_step(
     runs: list[StepControlRecord] = []
     where = f"at {step.frequency_hz:.4g} Hz, {step.level_n:g} N (step {step.plan_index})"
     accepted, reason = False, ""
+    probed = False
     while True:
         yield SetDrive(step.frequency_hz, drive, orders, acq.ramp_s)
         m = yield Acquire(
@@ -256,7 +280,10 @@ def _one_step(
             and errors.size >= policy.restart_after
             and errors[-1] > max(2.0 * errors.min(), RESTART_ERROR)
         )
-        if not (decision.done or out_of_budget or wandering):
+        probe = None
+        if not (decision.done or out_of_budget or wandering or probed):
+            probe = _fold_probe(history, errors, policy.restart_after, fi, i1, targets, low_gain)
+        if not (decision.done or out_of_budget or wandering or probe is not None):
             drive = decision.drive_v
             continue
         run = controller.record
@@ -264,6 +291,16 @@ def _one_step(
             status = "max-iterations" if out_of_budget else "restart"
             run = dataclasses.replace(run, status=status, reason=decision.reason)
         runs.append(run)
+        if probe is not None:
+            probed = True
+            yield Warn(
+                "fold",
+                f"force control {where}: the force stopped following the drive at "
+                f"{abs(drive[i1]):.4g} V (a turning point of the force-drive curve, the target "
+                f"beyond it); control starts again from {abs(probe[i1]):.4g} V",
+            )
+            drive = controller.start_step(targets, low_gain, probe)
+            continue
         if (
             not runs[:-1]
             and run.diverged
@@ -341,6 +378,57 @@ def _one_step(
     t0 = m.first_index / ctx.sample_rate_hz
     yield WriteStep(record, control, m.samples, t0, m.settled)
     return record, control.final_gain
+
+
+def _fold_probe(
+    history: list[tuple[np.ndarray, Measurement]],
+    errors: np.ndarray,
+    window: int,
+    fi: int,
+    i1: int,
+    targets: np.ndarray,
+    low_gain: np.ndarray | None,
+) -> np.ndarray | None:
+    """The drive to start again from when the step stalls at a turning point, else None.
+
+    Near a resonance the fundamental force is not a monotonic function of the drive: it rises
+    from zero while the structure responds little, peaks as the response grows into the
+    resonance (the shaker cannot push a resonating structure: force drop-out), dips, and rises
+    again once the response is past the resonance's fold. A target out of reach of the part
+    the iteration is on leaves the quasi-Newton steps creeping along a flat top or bottom.
+    Stalled means: over the latest ``window`` measurements of this run the fundamental's
+    amplitude error did not halve while their drives stayed within ``FOLD_CREEP`` of each
+    other, and a straight line through their fundamental drive and force amplitudes rises with less
+    than ``FOLD_SLOPE`` times the force per volt. Then:
+
+    - the force is above the target, or short of it in the dip (force per volt below
+      ``LOW_BRANCH_GAIN`` times the low-level gain ``low_gain``): the rising part below holds
+      a solution (the force rises from zero); the probe is the drive the low-level gain
+      predicts for the target, at most ``FOLD_PROBE_RATIO`` of the current drive;
+    - the force is short of the target at the top of the rising part (force per volt near the
+      low-level gain): the solution lies beyond the dip; the probe is ``FOLD_JUMP`` times the
+      current drive.
+
+    The whole drive vector is scaled.
+    """
+    if low_gain is None or window < 3 or errors.size < window:
+        return None
+    v = np.array([abs(d[i1]) for d, _ in history[-window:]])
+    f = np.array([abs(m.phasors[fi][i1]) for _, m in history[-window:]])
+    t1 = abs(targets[i1])
+    miss = np.abs(f - t1)
+    if miss[1:].min() <= 0.5 * miss[0]:
+        return None
+    if not (v.mean() > 0 and 1e-3 * v.mean() < np.ptp(v) <= FOLD_CREEP * v.mean()):
+        return None
+    per_volt = f.mean() / v.mean()
+    if np.polyfit(v, f, 1)[0] >= FOLD_SLOPE * per_volt:
+        return None
+    drive = history[-1][0]
+    g_low = max(abs(low_gain[i1, i1]), np.finfo(float).tiny)
+    if f[-1] < t1 and per_volt >= LOW_BRANCH_GAIN * g_low:
+        return drive * FOLD_JUMP
+    return drive * min(t1 / g_low, FOLD_PROBE_RATIO * abs(drive[i1])) / abs(drive[i1])
 
 
 def _merge_runs(runs: list[StepControlRecord]) -> StepControlRecord:

@@ -265,3 +265,70 @@ def test_misuse_and_bad_settings_are_explained():
         ControlSettings(orders=(2, 3))
     with pytest.raises(ValueError, match="ControlSettings.gain_drift"):
         ControlSettings(gain_drift=-1)
+
+
+# ------------------------------------------------------------------ steps near a turning point
+
+
+def _unguarded(max_iterations: int) -> ControlSettings:
+    """Settings whose gain checks never stop a step (the plants here are not physical)."""
+    return ControlSettings(
+        max_drive_v=10.0,
+        max_iterations=max_iterations,
+        max_gain_ratio=1e300,
+        max_gain_phase_change_deg=180,
+        max_condition=1e300,
+    )
+
+
+def test_a_fundamental_well_inside_its_tolerance_is_held_while_the_other_orders_are_corrected():
+    # the gain estimate claims a strong coupling from the fundamental's drive into the 3rd
+    # order (as near a contact's fold); a full quasi-Newton step would move the fundamental's
+    # drive to correct the 3rd order and put the fundamental off target
+    gain = np.diag(GAINS).astype(complex)
+    gain[2, 0] = 0.5 * abs(GAINS[0])
+    ctl = ForceController(SETTINGS)
+    drive = ctl.start_step(TARGETS, gain)
+    force = TARGETS * np.array([1.003, 1.3, 0.6])  # fundamental at +0.3 %: well inside 1 %
+    decision = ctl.next_drive(drive, force)
+    assert not decision.done
+    assert decision.drive_v[0] == drive[0]
+    assert np.all(decision.drive_v[1:] != drive[1:])
+    # just inside the tolerance (0.9 %) the fundamental is corrected too: the noise of the
+    # next measurements would otherwise leave it wavering across the limit
+    ctl.start_step(TARGETS, gain)
+    decision = ctl.next_drive(drive, TARGETS * np.array([1.009, 1.3, 0.6]))
+    assert decision.drive_v[0] != drive[0]
+
+
+def test_a_worse_measurement_sends_the_next_step_from_the_best_drive_with_half_the_radius():
+    settings = ControlSettings(max_drive_v=10.0, max_step_ratio=0.5)
+    ctl = ForceController(settings)
+    drive0 = ctl.start_step(TARGETS, GAINS)
+    d1 = ctl.next_drive(drive0, TARGETS * 0.8).drive_v  # error 0.2: the best so far
+    worse = ctl.next_drive(d1, TARGETS * 1.6)  # error 0.6
+    assert not worse.done
+    step = np.linalg.norm(worse.drive_v - drive0)
+    assert 0 < step <= 0.25 * np.linalg.norm(drive0) * (1 + 1e-12)
+
+
+def test_measurements_that_do_not_improve_do_not_freeze_the_drive():
+    # the fundamental force does not follow the drive and sits 1.5 % low (a flat top of the
+    # force-drive curve): no measurement improves on the first and the trust radius halves
+    # each time, but never below twice the fundamental's tolerance
+    ctl = ForceController(_unguarded(max_iterations=20))
+    best = drive = ctl.start_step(TARGETS, GAINS)
+    sizes = []  # every step is taken from the best measurement, here the first
+    for _ in range(10):
+        decision = ctl.next_drive(drive, TARGETS * np.array([0.985, 1.0, 1.0]))
+        assert not decision.done
+        drive = decision.drive_v
+        sizes.append(np.linalg.norm(drive - best) / np.linalg.norm(best))
+    assert min(sizes) >= 0.014  # the 1.5 % the fundamental needs (unfloored: 0.1 % by the 10th)
+
+
+def test_a_creeping_error_at_the_noise_floor_is_not_divergence():
+    errors = iter([0.0111, 0.0112, 0.0116, 0.0117, 0.0118])
+    plant = lambda v: TARGETS * (1 + next(errors))
+    record, decision = _run(plant, GAINS, settings=_unguarded(max_iterations=5))
+    assert decision.status == "max-iterations" and record.iterations == 5

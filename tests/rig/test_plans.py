@@ -14,6 +14,7 @@ from rig.commands import (
     Notify,
     SetDrive,
     SetWaveform,
+    Warn,
     WriteRandom,
     WriteStep,
 )
@@ -240,3 +241,69 @@ def test_setdrive_commands_respect_the_orders():
     drives = [c for c in commands if isinstance(c, SetDrive)]
     assert all(d.orders == plan.excitation.orders and d.drive_v.shape == (3,) for d in drives)
     assert all(isinstance(c, WriteStep) for c in commands if type(c).__name__ == "WriteStep")
+
+
+# ------------------------------------------------------------------ a force-drive curve with a fold
+
+
+class _FoldCurve:
+    """Fundamental force amplitude a non-monotonic function of the drive amplitude.
+
+    As a shaker drives a structure into a hardening resonance: the force rises with the drive
+    (67 N/V), peaks at 5.4 N (0.09 V) as the response grows into the resonance, dips to 2.2 N
+    (0.148 V) and rises again past the fold. The other orders are those of ``_smooth_gain``.
+    """
+
+    a = np.array([0.0, 0.03, 0.06, 0.09, 0.12, 0.148, 0.18, 0.22, 0.3, 0.5])
+    f = np.array([0.0, 2.0, 4.0, 5.4, 3.6, 2.2, 3.5, 6.4, 12.0, 25.0])
+
+    def __init__(self) -> None:
+        from scipy.interpolate import PchipInterpolator
+
+        self.curve = PchipInterpolator(self.a, self.f)
+        self.rig: RecordingRig | None = None
+
+    def __call__(self, f, orders):
+        g = _smooth_gain(f, orders)
+        v1 = abs(self.rig._drive[1][0])
+        if v1 > 0:
+            g[0] = float(self.curve(v1)) / v1 * g[0] / abs(g[0])
+        return g
+
+
+def _fold_step(level_n: float, start_v: float, restart_after: int = 4):
+    """One force-controlled step on the fold curve, started at ``start_v`` on the fundamental."""
+    plan = reduced_plan(levels_n=(level_n,), ranges=((22.0, 22.0, 1.0),))
+    control = dataclasses.replace(load_plan("paper").control, restart_after=restart_after)
+    plan = dataclasses.replace(
+        plan, pretest=dataclasses.replace(plan.pretest, enabled=False), control=control
+    )
+    curve = _FoldCurve()
+    rig = RecordingRig(context(setup_at(), sample_rate_hz=5120.0), curve)
+    curve.rig = rig
+    gain = _smooth_gain(22.0, plan.excitation.orders)
+    gain[0] = level_n / start_v * gain[0] / abs(gain[0])
+    commands = rig.run(stepped_sine_procedure(plan, initial_gain=gain))
+    folds = [c for c in commands if isinstance(c, Warn) and c.kind == "fold"]
+    return rig.steps[0].record, folds
+
+
+def test_a_target_out_of_reach_past_the_peak_is_found_on_the_rising_part():
+    # 2 N from the dip (2.2 N at best there): the controller creeps along the flat bottom,
+    # then starts again from below the peak and finds 2 N at 0.03 V
+    record, folds = _fold_step(2.0, 0.148)
+    assert record.control_converged and len(folds) == 1
+    assert abs(record.drive[0]) == pytest.approx(0.03, rel=0.05)
+    assert abs(abs(record.force[0]) - 2.0) <= 0.02
+    # without the probe (restart_after 0) it stays on the flat bottom
+    record, folds = _fold_step(2.0, 0.148, restart_after=0)
+    assert not record.control_converged and not folds
+
+
+def test_a_target_above_the_peak_is_found_beyond_the_dip():
+    # 6 N from the peak (5.4 N): nothing below reaches it; the drive doubles past the dip
+    record, folds = _fold_step(6.0, 0.09)
+    assert record.control_converged and len(folds) == 1
+    assert 0.2 < abs(record.drive[0]) < 0.23 and abs(abs(record.force[0]) - 6.0) <= 0.06
+    record, folds = _fold_step(6.0, 0.09, restart_after=0)
+    assert not record.control_converged and not folds
