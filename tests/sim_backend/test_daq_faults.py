@@ -111,7 +111,9 @@ def test_fast_mode_runs_far_ahead_of_the_clock() -> None:
     daq = running()
     t0 = time.monotonic()
     daq.read(int(60 * FS), 5.0)
-    assert time.monotonic() - t0 < 0.6  # 60 s of samples, >= 100 x real time
+    # 60 s of samples: a read paced by the clock takes 60 s; not paced, a small fraction of it
+    # (about 0.3 s on an idle machine; the bound leaves room for a loaded one)
+    assert time.monotonic() - t0 < 6.0
     daq.close()
 
 

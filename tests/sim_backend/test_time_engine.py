@@ -104,6 +104,8 @@ def test_paper_style_run_is_far_faster_than_real_time() -> None:
     run = run_stepped_sine(daq, (2.0,), np.arange(24.0, 28.1, 0.5))
     daq.close()
     assert len(run.steps) == 9 and run.simulated_s > 40.0
-    assert run.simulated_s / run.wall_s > 100.0
+    # not paced by the clock (a paced run is 1x); about 90x on an idle machine, the bound
+    # leaves room for a loaded one (the speed itself is a benchmark's figure)
+    assert run.simulated_s / run.wall_s > 10.0
     # away from the resonance the force controller reaches its targets on the simulated rig
     assert all(s.converged for s in run.steps if s.frequency_hz > 27.0)
