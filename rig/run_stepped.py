@@ -224,8 +224,8 @@ def _one_step(
     """Control, record and write one step; returns (StepRecord, final gain estimate).
 
     ``low_gain`` (H, H) is the drive-to-force gain at a low level (the loop check): where the
-    step stalls at a turning point of the force-drive curve, control starts again from the
-    drive it predicts, below the turning point (:func:`_fold_probe`).
+    step stalls at a turning point of the force-drive curve, control starts again on its far
+    side, from a drive chosen with it (:func:`_fold_probe`).
     """
     acq, policy = plan.acquisition, plan.control
     orders = plan.excitation.orders
@@ -398,8 +398,8 @@ def _fold_probe(
     the iteration is on leaves the quasi-Newton steps creeping along a flat top or bottom.
     Stalled means: over the latest ``window`` measurements of this run the fundamental's
     amplitude error did not halve while their drives stayed within ``FOLD_CREEP`` of each
-    other, and a straight line through their fundamental drive and force amplitudes rises with less
-    than ``FOLD_SLOPE`` times the force per volt. Then:
+    other, and a straight line through their fundamental drive and force amplitudes rises
+    with less than ``FOLD_SLOPE`` times the force per volt. Then:
 
     - the force is above the target, or short of it in the dip (force per volt below
       ``LOW_BRANCH_GAIN`` times the low-level gain ``low_gain``): the rising part below holds
