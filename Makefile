@@ -20,7 +20,7 @@ demo: setup
 	$(PY) -m rig workflow --out demo-output
 
 test: setup
-	QT_QPA_PLATFORM=offscreen $(PY) -m pytest -q -n auto
+	QT_QPA_PLATFORM=offscreen $(PY) -m pytest -q -n auto --dist worksteal
 	$(PY) -m ruff check .
 
 lint: setup
