@@ -30,7 +30,9 @@ def test_paper_run_on_the_reference_truth(tmp_path):
     # realised frequencies follow the plan: 21-40 Hz, refined to 0.1 Hz in 24-28 Hz
     rel = np.abs(data.frequency_hz / data.frequency_target_hz - 1)
     assert np.all(rel < 2e-3)
-    assert summary.rig_time_s > 10 * summary.wall_s  # fast mode: well above real time
+    # fast mode: not paced by the clock (a paced run is 1x; about 25x on an idle machine, the
+    # bound leaves room for a loaded one)
+    assert summary.rig_time_s > 3 * summary.wall_s
     # the force is recorded at orders 4-8 too (not controlled): at the noise away from the
     # contact, and where the tip strikes the stop several per cent of the fundamental
     assert data.extra_orders == (4, 5, 6, 7, 8)
