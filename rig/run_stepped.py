@@ -58,9 +58,10 @@ logger = logging.getLogger(__name__)
 
 # control starts again when the latest error exceeds this and twice the best (restart_after)
 RESTART_ERROR = 0.1
-# a turning point of the force-drive curve: over the last restart_after measurements the error
-# did not halve and the fundamental force followed the drive with less than this fraction of
-# its own force per volt (flat or falling: past the peak of the force before a resonance)
+# a turning point of the force-drive curve: over the last restart_after measurements the
+# fundamental's miss did not halve and its force followed the drive with less than this
+# fraction of its own force per volt (flat or falling: past the peak of the force before a
+# resonance)
 FOLD_SLOPE = 0.25
 # creeping: the drives of those measurements span at most this fraction of their mean (wider
 # is a wandering iteration, which the restart handles)
@@ -282,7 +283,9 @@ def _one_step(
         )
         probe = None
         if not (decision.done or out_of_budget or wandering or probed):
-            probe = _fold_probe(history, errors, policy.restart_after, fi, i1, targets, low_gain)
+            probe = _fold_probe(
+                history, errors.size, policy.restart_after, fi, i1, targets, low_gain
+            )
         if not (decision.done or out_of_budget or wandering or probe is not None):
             drive = decision.drive_v
             continue
@@ -382,7 +385,7 @@ def _one_step(
 
 def _fold_probe(
     history: list[tuple[np.ndarray, Measurement]],
-    errors: np.ndarray,
+    run_length: int,
     window: int,
     fi: int,
     i1: int,
@@ -396,7 +399,8 @@ def _fold_probe(
     resonance (the shaker cannot push a resonating structure: force drop-out), dips, and rises
     again once the response is past the resonance's fold. A target out of reach of the part
     the iteration is on leaves the quasi-Newton steps creeping along a flat top or bottom.
-    Stalled means: over the latest ``window`` measurements of this run the fundamental's
+    Stalled means: over the latest ``window`` measurements of this run (``run_length``
+    measurements since control last started) the fundamental's
     amplitude error did not halve while their drives stayed within ``FOLD_CREEP`` of each
     other, and a straight line through their fundamental drive and force amplitudes rises
     with less than ``FOLD_SLOPE`` times the force per volt. Then:
@@ -411,7 +415,7 @@ def _fold_probe(
 
     The whole drive vector is scaled.
     """
-    if low_gain is None or window < 3 or errors.size < window:
+    if low_gain is None or window < 3 or run_length < window:
         return None
     v = np.array([abs(d[i1]) for d, _ in history[-window:]])
     f = np.array([abs(m.phasors[fi][i1]) for _, m in history[-window:]])

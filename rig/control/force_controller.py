@@ -299,7 +299,7 @@ class _StepState:
     errors: list[float] = field(default_factory=list)
     stds: list[np.ndarray] = field(default_factory=list)
     clamped: list[bool] = field(default_factory=list)
-    radius: float = math.inf  # trust radius of the next step, relative to |V|
+    radius: float = 0.0  # trust radius of the next step, relative to |V|
     status: str = "running"
     reason: str = ""
 
@@ -353,8 +353,10 @@ class ForceController:
             raise ValueError("targets_n: the fundamental's target must be non-zero")
         gain = self._gain_matrix(initial_gain)
         prior = self._prior_covariance(gain)
-        self._state = _StepState(targets, gain.copy(), gain.copy(), prior, prior.copy())
-        self._state.radius = self.settings.max_step_ratio
+        self._state = _StepState(
+            targets, gain.copy(), gain.copy(), prior, prior.copy(),
+            radius=self.settings.max_step_ratio,
+        )  # fmt: skip
         if initial_drive_v is None:
             drive = np.linalg.solve(gain, targets)
         else:
