@@ -135,14 +135,31 @@ def _key(*parts: str) -> str:
     return h.hexdigest()[:12]
 
 
+#: The code that makes the simulated runs: the simulated rig, the rig's engine and the parts
+#: of the analysis the simulated rig balances and builds its structure with.
+RUN_CODE = (
+    "sim_backend",
+    "rig",
+    "analysis/mhb",
+    "analysis/elements",
+    "analysis/linear",
+    "analysis/fe",
+    "analysis/system.py",
+    "analysis/model.py",
+    "analysis/model_file.py",
+)
+
+
 @functools.cache
 def _code_version() -> str:
-    """A digest of the code that makes the simulated runs (the simulated rig and the rig's
-    engine): a run cached by other code is made again, not reused."""
+    """A digest of the code that makes the simulated runs (:data:`RUN_CODE`, without the
+    lab GUI and the acquisition service): a run cached by other code is made again, not
+    reused."""
     root = Path(__file__).resolve().parent.parent
     h = hashlib.sha256()
-    for folder in ("sim_backend", "rig"):
-        for f in sorted((root / folder).rglob("*.py")):
+    for part in RUN_CODE:
+        path = root / part
+        for f in sorted(path.rglob("*.py")) if path.is_dir() else [path]:
             if "gui" not in f.parts and "service" not in f.parts:
                 h.update(f.relative_to(root).as_posix().encode())
                 h.update(f.read_bytes())

@@ -22,10 +22,13 @@
    best picks at unmeasured locations (a group of springs, a joint); each recalibrated by
    Levenberg-Marquardt from the screen's (or the linear test's) values, at most ``workers``
    at a time. The picks at unmeasured locations are dropped once a verified candidate
-   is at the noise or the stage has used ``time_budget_s`` of processor time. Only if
-   none explains it and processor time is left: the fits stopped for time go on, then the
-   next laws, the best of each law family the evidence points at, and further starts for
-   the best two. Every limit is processor time, so a diagnosis does the same work however
+   is at the noise or the stage has used ``time_budget_s`` of processor time. If none
+   explains it: the fits that went most of the way go on with their weights recomputed
+   (and, while processor time is left, those stopped for time while still falling fast);
+   then the best one's law at the screen's next measured points, started from its fit (or,
+   at an unmeasured location, the simplest of the next laws there); then, while time is
+   left, the next laws, the best of each law family the evidence points at, and further
+   starts for the best two. Every limit is processor time, so a diagnosis does the same work however
    busy the machine is.
 5. **Rank** the verified candidates by BIC on the same steps against the recalibrated model;
    candidates within ``tie_bic`` of the best form a group (the simplest law first). The effect
@@ -170,12 +173,12 @@ def _shortlist(
             if len(laws) >= n_verify:
                 break
     n_lead = min(1, len(first))
-    if first:
-        lead = first[0].candidate
-        same = [f for f in nonlinear if f.candidate.law == lead.law
-                and f.candidate.location != lead.location]  # fmt: skip
-        first[1:1] = same[:1]
-        n_lead += len(same[:1])
+    if first and first[0].candidate.location.kind == "point":
+        # neighbouring measured points tie in a screen (a law in a joint or a group of
+        # springs has no neighbour there: its next location is another kind of place)
+        same = _other_points(nonlinear, first[0].candidate, ())[:1]
+        first[1:1] = same
+        n_lead += len(same)
     lead = first[0].candidate.law if first else None
 
     def screen_gain(f) -> float:
@@ -214,6 +217,58 @@ def _shortlist(
         if best is not None and all(best.candidate != g.candidate for g in first + second):
             second.append(best)
     return first, second[:4]
+
+
+def _other_points(fits: list[ScreenFit], cand: Candidate, done) -> list[ScreenFit]:
+    """Screened fits of ``cand``'s law at the other measured points, best first, leaving out
+    the candidates in ``done``."""
+    return [f for f in fits if f.candidate.law == cand.law and f.candidate.location.kind == "point"
+            and f.candidate.location != cand.location and f.candidate not in done]  # fmt: skip
+
+
+def _walk_jobs(best, fits: list[ScreenFit], tried, n: int):
+    """The best verified law at the next ``n`` measured points the screen ranks it at, each
+    started from the best's fit (its own values and the model's nonlinear parameters): a
+    screen ranks neighbouring points of a strong effect loosely, a fit from a neighbour's
+    values is near. Returns ``[(ScreenFit, values, known)]``."""
+    cand = best.candidate
+    names = cand.parameter_names()
+    values = {p: best.parameters[n] for p, n in names.items() if n in best.parameters}
+    known = {n: v for n, v in best.parameters.items() if n not in names.values()}
+    return [(f, values, known) for f in _other_points(fits, cand, tried)[:n]]
+
+
+def _promising(v: Verified, refit: Verified, st: DiagnosisSettings) -> bool:
+    """The fit went most of the way: a strong effect's, not one that explains little."""
+    return v.rms_over_noise() <= st.restart_fraction * refit.rms_over_noise()
+
+
+def _to_continue(done: list[Verified], refit: Verified, st: DiagnosisSettings,
+                 time_left: bool) -> list[int]:  # fmt: skip
+    """The (at most two, best first) verifications that go on from where they stopped.
+
+    A strong effect's fit may need longer than the time a verification has: those stopped for
+    time while still lowering the metric fast go on while the stage has time; those that went
+    most of the way (:func:`_promising`) go on in any case. Each goes on with the weights (the
+    force's error through the model) recomputed at its values, and once more at the values it
+    reaches: the start model's tangents can stall a fit above the noise near a jump (the
+    clamp's friction at 3.4 x the noise's chi-square, 1.16 one iteration after reweighting).
+    """
+    going = [i for i, v in enumerate(done) if not v.failed and (_promising(v, refit, st) or (
+        v.stopped and v.last_decrease() >= st.continue_decrease and time_left))]  # fmt: skip
+    return sorted(going, key=lambda i: done[i].chi2_per_dof())[:2]
+
+
+def _other_laws(screen: Screen, fits: list[ScreenFit], cand: Candidate, tried,
+                n: int) -> list[ScreenFit]:  # fmt: skip
+    """Other laws at ``cand``'s location (a group of springs, a joint), refined: of the next
+    ``n + 1`` by BIC, the ``n`` simplest. Look-alike laws there screen alike (the mounts'
+    cubic hardening ranked fourth behind a contact, a two-sided gap and a gap spring, all
+    stiffening), and on a tie the simpler law is preferred."""
+    there = [screen.refined(f) for f in fits if f.candidate.location == cand.location
+             and f.candidate.law != cand.law and f.candidate not in tried]  # fmt: skip
+    near = sorted(there, key=lambda f: f.bic)[: n + 1]
+    return sorted(near, key=lambda f: (f.candidate.n_params, f.bic))[:n]
 
 
 def _linear_shortlist(base: LinearFit | None, fits: list[LinearFit], st: DiagnosisSettings):
@@ -373,23 +428,41 @@ def diagnose(
         def unexplained() -> bool:
             return _best_rms(done) > st.explained_rms
 
-        # a strong effect's fit may need longer than the time a verification has: those
-        # stopped for time while still lowering the metric fast go on from where they were
-        if unexplained() and left() > 0:
-            going = sorted((i for i, v in enumerate(done) if v.stopped
-                            and v.last_decrease() >= st.continue_decrease),
-                           key=lambda i: done[i].chi2_per_dof())[:2]  # fmt: skip
-            if going:
-                say("continue", {"n": len(going)})
-            cont = [_Later(ex, run_verify, dataclasses.replace(
-                verify_job(origin[i].candidate, start_toml=done[i].model_toml),
-                max_seconds=st.continue_seconds)) for i in going]  # fmt: skip
-            for i, p in zip(going, cont, strict=True):
-                v = p.result()
-                if v.chi2_per_dof() < done[i].chi2_per_dof():
-                    v.seconds += done[i].seconds
-                    v.history = done[i].history + v.history
-                    done[i] = v
+        # the fits that went most of the way go on (:func:`_to_continue`); if that does not
+        # explain it, the best: at a measured point, its law at the next points by the
+        # screen, from the best's fit (the screen can rank a strong effect's true point third
+        # or fourth); at an unmeasured location, the next laws there
+        going = _to_continue(done, refit, st, left() > 0) if unexplained() else []
+        if going:
+            say("continue", {"n": len(going)})
+        cont = [_Later(ex, run_verify, dataclasses.replace(
+            verify_job(origin[i].candidate, start_toml=done[i].model_toml),
+            max_seconds=st.continue_seconds, reweight_passes=1)) for i in going]  # fmt: skip
+        for i, p in zip(going, cont, strict=True):
+            v = p.result()
+            if v.chi2_per_dof() < done[i].chi2_per_dof():
+                v.seconds += done[i].seconds
+                v.history = done[i].history + v.history
+                done[i] = v
+        ranked = [i for i in np.argsort([v.chi2_per_dof() for v in done]) if not done[i].failed]
+        lead = origin[ranked[0]] if ranked else None
+        if unexplained() and isinstance(lead, ScreenFit):
+            tried = [o.candidate for o in origin]
+            if lead.candidate.location.kind == "point":
+                walk = _walk_jobs(done[ranked[0]], fits, tried, st.n_walk)
+                say("neighbours", {"n": len(walk)})
+            else:
+                laws = _other_laws(screen, fits, lead.candidate, tried, st.n_walk)
+                walk = [(f, f.values, f.known) for f in laws]
+                say("other laws", {"n": len(walk)})
+            more = [_Later(ex, run_verify, dataclasses.replace(
+                verify_job(f.candidate, values, known), give_up_chi2=bar))
+                for f, values, known in walk]  # fmt: skip
+            done += [p.result() for p in more]
+            origin += [f for f, _, _ in walk]
+
+        def promising(v: Verified) -> bool:
+            return _promising(v, refit, st)
 
         if unexplained() and second and left() > 0:
             more = [_Later(ex, run_verify, verify_job(f.candidate, f.values, f.known))
@@ -401,8 +474,8 @@ def diagnose(
         best_rms = done[order[0]].rms_over_noise() if done else math.inf
         # further starts only for a candidate that went most of the way (a local minimum of
         # a strong effect), not for one that explains little
-        promising = best_rms <= st.restart_fraction * refit.rms_over_noise()
-        if st.n_starts > 0 and best_rms > st.explained_rms and promising and left() > 0:
+        if (st.n_starts > 0 and best_rms > st.explained_rms and done
+                and promising(done[order[0]]) and left() > 0):  # fmt: skip
             again = [int(i) for i in order[:2] if not done[i].failed]
             say("restart", {"n": len(again)})
             retry = []

@@ -170,10 +170,12 @@ def _watch(seen: list, progress, deadline: float | None, give_up, h: dict) -> No
         progress("lm", h)
     if deadline is not None and time.process_time() > deadline and h["iteration"] > 0:
         raise _OutOfTime
-    if give_up is not None and h["iteration"] >= 2 and len(seen) >= 2:
-        # two iterations in, still above the bar and no longer falling fast: hopeless
+    if give_up is not None and h["iteration"] >= 1 and len(seen) >= 2:
+        # still above the bar and no longer falling fast: hopeless two iterations in, or one
+        # when at twice the bar (an iteration can take a verification's whole time)
         bar, dof = give_up
-        if 2 * h["cost"] / dof() > bar and h["cost"] > 0.5 * seen[-2]["cost"]:
+        above = 2 * h["cost"] / dof() / (bar if h["iteration"] >= 2 else 2 * bar)
+        if above > 1 and h["cost"] > 0.5 * seen[-2]["cost"]:
             raise _GiveUp
 
 
@@ -274,9 +276,10 @@ def refit(
         work however busy the machine is): it stops at its first evaluation past it and
         returns the last accepted iterate.
     give_up_chi2 : float, optional
-        Stop (keeping the last iterate) when, two or more iterations in, the chi-square per
-        degree of freedom is still above this and the last iteration lowered it by less than
-        half: a candidate that does no better than the model without it.
+        Stop (keeping the last iterate) when the last iteration lowered the chi-square per
+        degree of freedom by less than half and it is still above this two or more iterations
+        in, or above twice this after the first: a candidate that does no better than the
+        model without it.
     reweight_passes : int
         Further Levenberg-Marquardt fits, each from the last one's values with the weights
         (the force's error through the model) recomputed there. The first fit weighs the

@@ -38,6 +38,11 @@ class DiagnosisSettings:
     n_verify : int
         Distinct laws of the screen verified in the full model (the best law also at its
         second location).
+    n_walk : int
+        When the best verified candidate explains too little: at a measured point, its law
+        is verified at this many more measured points (the screen's next), started from its
+        fit; at an unmeasured location (the mounts, a joint), this many other laws there (the
+        simplest of the screen's next).
     n_refine : int
         Best screened candidates refined by the screen's alternations.
     verify_iterations : int
@@ -75,6 +80,7 @@ class DiagnosisSettings:
     linear_bic: float = 10.0
     linear_ratio: float = 0.3
     n_verify: int = 2
+    n_walk: int = 2
     n_refine: int = 6
     verify_iterations: int = 8
     verify_seconds: float = 12.0
@@ -93,6 +99,8 @@ class DiagnosisSettings:
             raise ValueError("DiagnosisSettings: thresholds must be positive")
         if self.n_verify < 1 or self.workers < 1 or self.verify_iterations < 1:
             raise ValueError("DiagnosisSettings: n_verify, workers, iterations must be >= 1")
+        if self.n_walk < 0:
+            raise ValueError(f"DiagnosisSettings.n_walk: must be >= 0, got {self.n_walk}")
         if not 0 <= self.rescreen_ratio < 1:
             raise ValueError(
                 f"DiagnosisSettings.rescreen_ratio: must be in [0, 1), got {self.rescreen_ratio}"

@@ -237,6 +237,7 @@ class Screen:
         self.n_iterations, self.rcond, self.n_time = n_iterations, rcond, n_time
         self.free = tuple(free_parameters)
         self._sampled = False
+        self._refined: dict[str, ScreenFit] = {}  # by candidate label
         self.predictor = p = predictor or BranchMatchedPredictor(model, data)
         self.n_channels = C = len(p.channel_indices)
         d = data
@@ -598,13 +599,17 @@ class Screen:
         """``f`` with the alternations at its clearance, or ``f`` if that is no better."""
         if f.refined:
             return f
+        if f.candidate.label in self._refined:
+            return self._refined[f.candidate.label]
         fixed = {p: f.values[p] for p in f.candidate.law.nonlinear if p in f.values}
         try:
             g = self.fit(f.candidate, nonlinear=fixed)
         except (ValueError, np.linalg.LinAlgError) as exc:
             log.warning("screen of %s failed: %s", f.candidate.label, exc)
             return f
-        return dataclasses.replace(g if g.bic < f.bic else f, refined=True)
+        out = self._refined[f.candidate.label] = dataclasses.replace(
+            g if g.bic < f.bic else f, refined=True)  # fmt: skip
+        return out
 
     # -- one fit ------------------------------------------------------------------------------
     def _parts(self, fr: _Frame, cand: Candidate | None, B_loc, values: dict):

@@ -78,6 +78,9 @@ class VerifyJob:
         The recalibration stops early when it stays above this chi-square per degree of
         freedom (the model recalibrated without the candidate):
         :func:`~analysis.diagnosis.refit.refit`'s ``give_up_chi2``.
+    reweight_passes : int
+        Further fits with the weights recomputed at the last fit's values
+        (:func:`~analysis.diagnosis.refit.refit`'s ``reweight_passes``).
     """
 
     model_toml: str
@@ -96,6 +99,7 @@ class VerifyJob:
     n_time: int = 128
     max_seconds: float | None = None
     give_up_chi2: float | None = None
+    reweight_passes: int = 0
 
 
 @dataclass
@@ -301,6 +305,7 @@ def _verify(job: VerifyJob, t0: float) -> Verified:
             distributions=dists, n_random_starts=job.n_starts, seed=job.seed,
             max_iterations=job.max_iterations, ftol=1e-4, n_harmonics=job.n_harmonics,
             n_time=job.n_time, max_seconds=job.max_seconds, give_up_chi2=job.give_up_chi2,
+            reweight_passes=job.reweight_passes,
         )  # fmt: skip
         fitted, history, params = r.model, r.history, r.parameters
         message = r.lm.message if r.lm is not None else ""

@@ -226,8 +226,9 @@ def solve_point(
             break
         alpha, r2 = 1.0, np.linalg.norm(R)
         for _ in range(st.max_halvings + 1):
+            # the full step with its Jacobian (usually taken); shorter trials without
             Xt = X + alpha * dX
-            Rt, Ft, dFt = residual(Xt, True)
+            Rt, Ft, dFt = residual(Xt, alpha == 1.0)
             rt2 = np.linalg.norm(Rt)
             if np.isfinite(rt2) and rt2 < (1 - 1e-4 * alpha) * r2:
                 break
@@ -236,6 +237,8 @@ def solve_point(
             if not (np.isfinite(rt2) and rt2 < r2):
                 message = "line search failed (no descent)"
                 break
+        if dFt is None:
+            Rt, Ft, dFt = residual(Xt, True)
         X, R, F, dF, rn = Xt, Rt, Ft, dFt, np.abs(Rt).max()
     else:
         if rn <= st.rtol * max(np.abs(X).max(), scale) + st.atol:

@@ -50,3 +50,26 @@ def test_fitting_again_with_the_weights_at_the_fit_scores_better(runs, reference
     assert again.history[n0]["chi2_per_dof"] == pytest.approx(
         first * m / (m - len(names)), rel=1e-3
     )
+
+
+def test_a_hopeless_candidate_gives_up_after_one_iteration_when_far_above_the_bar() -> None:
+    """The give-up rule on the fit's iterations (chi-square per degree of freedom = 2 cost /
+    dof): after the first iteration only at twice the bar, from the second at the bar, and
+    never while the metric still halves (the linear damper in the clamp of the benchmark's
+    friction run: 37 856 -> 36 486, over four times the recalibrated model's, one iteration
+    taking 10 s of a verification's 12)."""
+    from analysis.diagnosis.refit import _GiveUp, _watch
+
+    def run(chi2s, bar=100.0):
+        seen = []
+        for i, c in enumerate(chi2s):
+            try:
+                _watch(seen, None, None, (bar, lambda: 2), {"iteration": i, "cost": c})
+            except _GiveUp:
+                return i
+        return None
+
+    assert run([400.0, 380.0]) == 1  # twice the bar, barely falling: one iteration is enough
+    assert run([400.0, 150.0, 140.0]) == 2  # above the bar but under twice it: two
+    assert run([400.0, 190.0, 90.0, 85.0]) is None  # halving, then under the bar
+    assert run([4000.0, 1900.0, 900.0]) is None  # far above, but halving every time

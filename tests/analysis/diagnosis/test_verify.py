@@ -6,6 +6,10 @@ from __future__ import annotations
 import pytest
 
 from analysis.diagnosis import default_candidates
+from analysis.diagnosis.diagnose import _other_laws, _shortlist, _to_continue, _walk_jobs
+from analysis.diagnosis.result import DiagnosisSettings
+from analysis.diagnosis.screen import ScreenFit
+from analysis.diagnosis.signatures import Evidence
 from analysis.diagnosis.verify import UNMEASURED_START_FACTORS, VerifyJob, run_verify
 from tests.analysis.diagnosis.conftest import truth_as_model
 
@@ -69,9 +73,6 @@ def test_unmeasured_picks_are_refined_whatever_their_first_pass(reference_model)
     spring worse than the model itself (the states there are read coarsely), refined it gains
     two thirds of the best law's BIC: it is verified right after the best law's two
     locations, ahead of the next law."""
-    from analysis.diagnosis.diagnose import _shortlist
-    from analysis.diagnosis.screen import ScreenFit
-    from analysis.diagnosis.signatures import Evidence
 
     m = reference_model
     first_pass = {
@@ -104,3 +105,116 @@ def test_unmeasured_picks_are_refined_whatever_their_first_pass(reference_model)
     assert set(screen.calls) == {label for label in first_pass if "at point" not in label}
     # the joint's candidate explains nothing: not picked as an unmeasured location's law
     assert all("joint" not in f.candidate.label for f in first)
+
+
+def _verified(cand, rms: float, message: str = "", history=(), parameters=None):
+    """A verification whose residual is ``rms`` x noise on every step."""
+    import numpy as np
+
+    from analysis.diagnosis.verify import Verified
+
+    return Verified(cand, dict(parameters or {}), np.full(10, 2.0 * rms**2), 2, "",
+                    history=list(history), message=message)  # fmt: skip
+
+
+def test_a_law_in_a_joint_has_no_neighbouring_point(reference_model) -> None:
+    """The clamp friction's screen: the leading law sits in the clamp; the same law at a
+    measured point (the bottom member) is another place, not a neighbour, and is not verified
+    in the first stage (on the benchmark's run it converged at none of the fitted steps)."""
+
+    m = reference_model
+    bics = {
+        "gap_spring (above) with a joint spring at joint clamp rz": -24535.0,
+        "coulomb_friction with a joint spring at joint clamp rz": -23275.0,
+        "gap_spring (above) at point 10": -20000.0,
+        "cubic_spring at point 5": -15000.0,
+    }
+    fits = [ScreenFit(_candidate(m, label), 0.0, 1000, 1, bic, bic) for label, bic in bics.items()]
+
+    class Screen:
+        def refined(self, f):
+            return f
+
+    first, _ = _shortlist(Screen(), fits, Evidence([]), 2, 0.0)
+    labels = [f.candidate.label for f in first]
+    assert labels[0] == "gap_spring (above) with a joint spring at joint clamp rz"
+    assert "gap_spring (above) at point 10" not in labels
+    assert "coulomb_friction with a joint spring at joint clamp rz" in labels
+
+
+def test_the_best_law_walks_to_the_next_points_from_its_fit(reference_model) -> None:
+    """The second stop of the benchmark: the screen ranks the contact above points 5, 6, 4
+    and only then 7 (the truth); the first two verified, the law goes on at 4 and 7, each
+    started from the best fit's values, not from the screen's."""
+
+    m = reference_model
+    points = (5, 6, 4, 7, 11)
+    fits = [ScreenFit(_candidate(m, f"hertz_contact (above) at point {p}"),
+                      {"k_c": 1e5, "v": 1.0, "gap": 5e-4}, 1000, 1, -1e4 + i, -1e4 + i)
+            for i, p in enumerate(points)]  # fmt: skip
+    fits.insert(2, ScreenFit(_candidate(m, "cubic_spring at point 4"), {}, 1000, 1, 0.0, 0.0))
+    best_cand = fits[0].candidate
+    names = best_cand.parameter_names()
+    fitted = {names["k_c"]: 9.2e5, names["v"]: 52.5, names["gap"]: 8.4e-4,
+              "k_c": 4.69e5, "gap": 6.06e-4, "v_c": 27.1}  # fmt: skip
+    best = _verified(best_cand, 3.76, parameters=fitted)
+    walk = _walk_jobs(best, fits, [fits[0].candidate, fits[1].candidate], 2)
+    assert [f.candidate.label for f, _, _ in walk] == [
+        "hertz_contact (above) at point 4",
+        "hertz_contact (above) at point 7",
+    ]
+    for _, values, known in walk:
+        assert values == {"k_c": 9.2e5, "v": 52.5, "gap": 8.4e-4}
+        assert known == {"k_c": 4.69e5, "gap": 6.06e-4, "v_c": 27.1}
+
+
+def test_a_fit_that_went_most_of_the_way_goes_on_when_time_is_spent(reference_model) -> None:
+    """Continued fits: once the stage's time is spent only one that took the misfit to a fifth
+    of the recalibrated model's or less goes on, stopped for time or not and however slowly
+    its last iteration lowered the metric (the clamp's friction: 100 -> 2.8 x noise, its last
+    iteration 3.43 -> 3.41, 1.18 after the continued, reweighted fit)."""
+
+    st = DiagnosisSettings()
+    c = _candidate(reference_model, "cubic_spring at point 5")
+    refit = _verified(None, 100.0)
+    slow = [{"chi2_per_dof": 3.43}, {"chi2_per_dof": 3.41}]
+    fast = [{"chi2_per_dof": 3000.0}, {"chi2_per_dof": 1000.0}]
+    done = [
+        _verified(c, 70.0, "stopped: the time allowed is up", fast),  # fast but far
+        _verified(c, 2.8, "stopped: the time allowed is up", slow),  # most of the way
+        _verified(c, 19.0, "converged", slow),  # a fifth of 100 or less, converged
+        _verified(c, 50.0, "converged", slow),
+    ]
+    assert _to_continue(done, refit, st, time_left=False) == [1, 2]
+    # with time left the fast one that is still far goes on too (the best two of them)
+    assert _to_continue(done, refit, st, time_left=True) == [1, 2]
+    assert _to_continue(done[:1] + done[3:], refit, st, time_left=True) == [0]
+    assert _to_continue(done[:1] + done[3:], refit, st, time_left=False) == []
+
+
+def test_at_an_unmeasured_location_the_simplest_of_the_next_laws_go_on(reference_model) -> None:
+    """The mounts' hardening on a 96-period run: the contact at the mounts verified best but
+    short of the noise; the next laws there by the refined screen are a two-sided gap, a gap
+    spring and the (true) cubic spring; the two simplest of those three are verified next."""
+
+    m = reference_model
+    refined = {
+        "hertz_contact (above) at mounts": -22123.0,
+        "two_sided_gap at mounts": -19043.0,
+        "gap_spring (above) at mounts": -18942.0,
+        "cubic_spring at mounts": -15960.0,
+        "coulomb_friction at mounts": -10099.0,
+        "hertz_contact (above) at point 7": -30000.0,
+    }
+
+    class Screen:
+        def refined(self, f):
+            return ScreenFit(f.candidate, {}, 1000, 1, refined[f.candidate.label],
+                             refined[f.candidate.label], refined=True)  # fmt: skip
+
+    fits = [ScreenFit(_candidate(m, label), {}, 1000, 1, 0.0, 0.0) for label in refined]
+    lead = fits[0].candidate
+    laws = _other_laws(Screen(), fits, lead, [lead, fits[-1].candidate], 2)
+    assert [f.candidate.label for f in laws] == ["cubic_spring at mounts",
+                                                 "two_sided_gap at mounts"]  # fmt: skip
+    assert all(f.refined for f in laws)
