@@ -461,9 +461,6 @@ def diagnose(
             done += [p.result() for p in more]
             origin += [f for f, _, _ in walk]
 
-        def promising(v: Verified) -> bool:
-            return _promising(v, refit, st)
-
         if unexplained() and second and left() > 0:
             more = [_Later(ex, run_verify, verify_job(f.candidate, f.values, f.known))
                     for f in second]  # fmt: skip
@@ -475,7 +472,7 @@ def diagnose(
         # further starts only for a candidate that went most of the way (a local minimum of
         # a strong effect), not for one that explains little
         if (st.n_starts > 0 and best_rms > st.explained_rms and done
-                and promising(done[order[0]]) and left() > 0):  # fmt: skip
+                and _promising(done[order[0]], refit, st) and left() > 0):  # fmt: skip
             again = [int(i) for i in order[:2] if not done[i].failed]
             say("restart", {"n": len(again)})
             retry = []
