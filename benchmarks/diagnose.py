@@ -8,8 +8,8 @@ at zero and the file records them. The contact's impacts make the shaker push ba
 orders (up to 12 % of the fundamental at 8 N on the simulated rig); a model driven by the
 force's orders 1-3 alone cannot follow that at the file's noise, whatever its physics. Each
 step averages the plan's 48 periods, or ``$CLEARANCE_RIG_RECORD_BLOCKS`` (192 halves the
-noise of every phasor: a misfit is judged against the noise, and the weakest hidden effect,
-the mounts' hardening, misfits the paper-way calibration by only 4.2 x noise at 48 periods).
+noise of every phasor: a misfit is judged against the noise; the weakest hidden effect, the
+mounts' hardening, is measured with quieter accelerometers by its truth for that reason).
 The linear random test is :func:`linear_run`. Runs are made once and kept in a
 cache folder (``$CLEARANCE_RIG_CACHE``, default ``~/.cache/clearance-rig/diagnose``), keyed by
 the truth file, the plan, the seed and the code that makes them (the simulated rig's and the

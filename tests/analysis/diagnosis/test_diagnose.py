@@ -9,9 +9,10 @@ import pytest
 from analysis.diagnosis import DiagnosisSettings, augment, default_candidates, diagnose
 from tests.analysis.diagnosis.conftest import truth_as_model
 
-# generous limits of processor time: the verifications must converge on the reduced runs
+# limits of processor time over three times the benchmark's: the verifications must converge on
+# the reduced runs
 QUICK = DiagnosisSettings(n_verify=2, n_refine=4, n_starts=0, workers=2, verify_iterations=10,
-                          verify_seconds=120.0, time_budget_s=600.0)  # fmt: skip
+                          verify_seconds=40.0, time_budget_s=200.0)  # fmt: skip
 
 
 def _subset(model, locations, kinds):
@@ -65,7 +66,7 @@ def test_a_mass_is_found_on_the_linear_test_and_reported_as_linear(
     runs, reference_model, tmp_path
 ) -> None:
     data, linear = runs("mass_loading"), runs("mass_loading", linear=True)
-    cands = _subset(reference_model, ("point 5", "point 6", "point 7"),
+    cands = _subset(reference_model, ("point 6", "point 7"),
                     ("mass", "quadratic_damper", "cubic_spring"))  # fmt: skip
     result = diagnose(reference_model, data, linear_run=linear, candidates=cands,
                       settings=QUICK)  # fmt: skip
@@ -92,8 +93,7 @@ def test_a_strong_effect_the_second_stop_is_found_at_the_tip(runs, reference_mod
 @pytest.mark.slow
 def test_hardening_mounts_are_placed_at_the_mounts(runs, reference_model, tmp_path) -> None:
     data = runs("hardening_mounts")
-    cands = _subset(reference_model, ("mounts", "point 5", "point 6"),
-                    ("cubic_spring", "hertz_contact"))  # fmt: skip
+    cands = _subset(reference_model, ("mounts", "point 6"), ("cubic_spring", "hertz_contact"))
     result = diagnose(reference_model, data, candidates=cands, settings=QUICK)
     assert result.verdict == "explained", result.summary()
     assert result.rank_of("cubic_spring", "mounts") == 1
@@ -145,8 +145,7 @@ def test_a_calibration_pulled_far_away_is_screened_again_from_the_recalibrated_m
 @pytest.mark.slow
 def test_an_effect_outside_the_library_is_reported_unexplained(runs, reference_model) -> None:
     data = runs("hysteretic_joint")
-    cands = _subset(reference_model, ("joint clamp rz",),
-                    ("coulomb_friction", "joint_spring", "cubic_spring"))  # fmt: skip
+    cands = _subset(reference_model, ("joint clamp rz",), ("coulomb_friction", "joint_spring"))
     result = diagnose(reference_model, data, candidates=cands, settings=QUICK)
     assert result.verdict == "unexplained", result.summary()
     assert result.best is None

@@ -48,24 +48,18 @@ def test_further_starts_only_for_coefficients_at_unmeasured_dofs(reference_model
 
 
 @pytest.mark.slow
-def test_mounts_screened_twice_too_stiff_still_reach_the_noise(
-    runs, reference_model, monkeypatch
-) -> None:
-    """Started at twice the truth's k3 (the benchmark's screen read 1.9 times), the mounts'
-    hardening reaches the noise with the halved start and within 2 % of the truth's k3; from
-    that start alone, ten iterations leave it at about twice the noise."""
-    import analysis.diagnosis.verify as verify
-
+def test_mounts_screened_twice_too_stiff_still_reach_the_noise(runs, reference_model) -> None:
+    """Started at twice the truth's k3 (a 48-period run of the benchmark screened 1.9 times),
+    the mounts' hardening reaches the noise within 2 % of the truth's k3. (At the
+    accelerometer noise of the other truths a fit from that start alone stopped at about twice
+    the noise and the halved start was needed; at this truth's quieter accelerometers either
+    start gets there, and from 2.5 times neither does.)"""
     data = runs("hardening_mounts")
     cand = _candidate(reference_model, "cubic_spring at mounts")
     k3 = truth_as_model("hardening_mounts").parameters["k3_mount"].value
-    job = _job(reference_model, data.path, cand, {"k3": 2 * k3})
-    v = run_verify(job)
+    v = run_verify(_job(reference_model, data.path, cand, {"k3": 2 * k3}))
     assert v.rms_over_noise() <= 1.1, v.message
     assert abs(v.parameters["k3_cubic_spring_mounts"] / k3 - 1) < 0.02
-    monkeypatch.setattr(verify, "UNMEASURED_START_FACTORS", ())
-    alone = run_verify(job)
-    assert alone.rms_over_noise() > 1.5
 
 
 def test_unmeasured_picks_are_refined_whatever_their_first_pass(reference_model) -> None:
