@@ -267,6 +267,12 @@ def release_joint(
     """``model`` with direction ``joint[1]`` of joint ``joint[0]`` a spring of parameter
     ``name``."""
     jname, direction = joint
+    if not value > 0:  # a screen can estimate a released joint's stiffness below zero
+        what = f"{label}: " if label else ""
+        raise ValueError(
+            f"{what}the stiffness of joint {jname} in {direction} must be positive, got "
+            f"{value:.4g} (a start below zero: the law does not fit with the joint released)"
+        )
 
     def edit(doc):
         for j in doc.get("joints", []):

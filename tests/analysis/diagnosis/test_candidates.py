@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from analysis.diagnosis.candidates import Candidate, Law, default_candidates, default_laws
 from analysis.model import load_model
 
@@ -51,6 +53,10 @@ def test_each_kind_of_change_writes_a_valid_model(reference_model, tmp_path) -> 
     assert joint.parameters["k_clamp_rz"].group == "linear"
     # the original is untouched
     assert reference_model.frame.joints[0].rz == "rigid"
+    # a screen's joint stiffness below zero is refused, naming the candidate and the joint
+    gap = _find(cands, "gap_spring (below) with a joint spring at joint clamp rz")
+    with pytest.raises(ValueError, match=r"gap_spring \(below\).*joint clamp in rz.*-2\.793e\+04"):
+        gap.apply(reference_model, {"k": 1.8e5, "gap": 2e-5, "k_joint": -2.793e4})
 
 
 def test_linear_laws_are_reported_as_linear() -> None:
