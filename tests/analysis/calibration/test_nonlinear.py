@@ -45,6 +45,13 @@ def calibrated(run):
     return calibrate_nonlinear(model, data, st)
 
 
+@pytest.fixture(scope="module")
+def clean_cv(run, calibrated):
+    """The cross-validation of the clean file's calibration (shared: it is the costly part)."""
+    model, data = run
+    return cross_validate(model, data, calibrated)
+
+
 def test_calibration_recovers_the_truth(calibrated):
     """Gap within 1 %, k_c and v within 5 % (the acceptance of the method)."""
     p = calibrated.parameters
@@ -59,9 +66,8 @@ def test_calibration_recovers_the_truth(calibrated):
     assert calibrated.calibration_levels_n == (2.0, 4.0, 6.0)
 
 
-def test_cross_validation_scatter_matches_the_fisher_information(run, calibrated):
-    model, data = run
-    cv = cross_validate(model, data, calibrated)
+def test_cross_validation_scatter_matches_the_fisher_information(calibrated, clean_cv):
+    cv = clean_cv
     assert len(cv.folds) == 9  # 3 sensors x 3 levels
     assert np.all(cv.std_ratio > 0.4) and np.all(cv.std_ratio < 2.5)
     assert np.allclose(cv.mean, list(calibrated.parameters.values()), rtol=1e-2)
@@ -246,7 +252,7 @@ def test_steps_not_converged_under_force_control_are_left_out(run, calibrated, t
     assert not validate(model, bad, included).passed
 
 
-def test_a_fold_that_cannot_move_is_reported(run, calibrated, monkeypatch):
+def test_a_fold_that_cannot_move_is_reported(run, calibrated, clean_cv, monkeypatch):
     """A fold whose Gauss-Newton iteration takes no step keeps the optimum: it adds no scatter,
     and the result names it instead of reporting a falsely small std."""
     import analysis.calibration.crossval as cvm
@@ -257,7 +263,7 @@ def test_a_fold_that_cannot_move_is_reported(run, calibrated, monkeypatch):
         return original(fun, x0, **{**kwargs, "max_iterations": 0})
 
     model, data = run
-    moving = cross_validate(model, data, calibrated)
+    moving = clean_cv
     assert moving.stuck == [] and min(moving.iterations) >= 1
     monkeypatch.setattr(cvm, "least_squares_lm", no_step)
     cv = cross_validate(model, data, calibrated)
@@ -265,7 +271,7 @@ def test_a_fold_that_cannot_move_is_reported(run, calibrated, monkeypatch):
     assert cv.to_json()["stuck"] == cv.folds
 
 
-def test_fold_diagnostics_name_the_fold_the_model_cannot_fit(run, calibrated, tmp_path):
+def test_fold_diagnostics_name_the_fold_the_model_cannot_fit(run, clean_cv, tmp_path):
     """Each fold's chi-square at the optimum says whether the model fits it. On the clean file
     every fold is consistent with the noise (chi-square test at 1e-3); with acc7's fundamental
     at 6 N made 3 % too large (a systematic error no parameter can follow, 3 standard errors
@@ -276,7 +282,7 @@ def test_fold_diagnostics_name_the_fold_the_model_cannot_fit(run, calibrated, tm
     import h5py
 
     model, data = run
-    clean = cross_validate(model, data, calibrated)
+    clean = clean_cv
     assert clean.misfit_folds() == []
     assert np.all((clean.fold_chi2 > 0.7) & (clean.fold_chi2 < 1.4))
     assert np.allclose(clean.information_share.sum(axis=0), 1.0)
