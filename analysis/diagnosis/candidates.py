@@ -271,7 +271,8 @@ def release_joint(
         what = f"{label}: " if label else ""
         raise ValueError(
             f"{what}the stiffness of joint {jname} in {direction} must be positive, got "
-            f"{value:.4g} (a start below zero: the law does not fit with the joint released)"
+            f"{value:.4g} (a screen estimates one below zero where the law does not fit with "
+            "the joint released)"
         )
 
     def edit(doc):
