@@ -18,6 +18,11 @@ def _candidate(model, label):
     return next(c for c in default_candidates(model) if c.label == label)
 
 
+def _screened(model, label, bic=0.0, **kw) -> ScreenFit:
+    """A screen's fit of the candidate ``label`` scoring ``bic``."""
+    return ScreenFit(_candidate(model, label), 0.0, 1000, 1, bic, bic, **kw)
+
+
 def _job(model, data_path, cand, values, **kw) -> VerifyJob:
     return VerifyJob(model.to_toml(), str(model.source), str(data_path), None, cand,
                      dict(values), {}, None, 10, 0, 0, kw.pop("start_toml", None), 9, 128,
@@ -79,18 +84,16 @@ def test_unmeasured_picks_are_refined_whatever_their_first_pass(reference_model)
     }
     refined = {"cubic_spring at mounts": -8405.0, "linear_damper at mounts": -2866.0}
 
-    def fit(label, bic):
-        return ScreenFit(_candidate(m, label), 0.0, 1000, 1, bic, bic)
-
     class Refiner:
         calls: list[str] = []
 
         def refined(self, f):
             self.calls.append(f.candidate.label)
-            return fit(f.candidate.label, min(f.bic, refined.get(f.candidate.label, f.bic)))
+            return _screened(m, f.candidate.label,
+                             min(f.bic, refined.get(f.candidate.label, f.bic)))  # fmt: skip
 
     screen = Refiner()
-    fits = [fit(label, bic) for label, bic in first_pass.items()]
+    fits = [_screened(m, label, bic) for label, bic in first_pass.items()]
     first, second = _shortlist(screen, fits, Evidence([]), 2, 0.0)
     labels = [f.candidate.label for f in first]
     assert labels == ["hertz_contact (above) at point 6", "hertz_contact (above) at point 7",
@@ -123,7 +126,7 @@ def test_a_law_in_a_joint_has_no_neighbouring_point(reference_model) -> None:
         "gap_spring (above) at point 10": -20000.0,
         "cubic_spring at point 5": -15000.0,
     }
-    fits = [ScreenFit(_candidate(m, label), 0.0, 1000, 1, bic, bic) for label, bic in bics.items()]
+    fits = [_screened(m, label, bic) for label, bic in bics.items()]
 
     class Screen:
         def refined(self, f):
@@ -143,10 +146,10 @@ def test_the_best_law_walks_to_the_next_points_from_its_fit(reference_model) -> 
 
     m = reference_model
     points = (5, 6, 4, 7, 11)
-    fits = [ScreenFit(_candidate(m, f"hertz_contact (above) at point {p}"),
-                      {"k_c": 1e5, "v": 1.0, "gap": 5e-4}, 1000, 1, -1e4 + i, -1e4 + i)
+    fits = [_screened(m, f"hertz_contact (above) at point {p}", -1e4 + i,
+                      values={"k_c": 1e5, "v": 1.0, "gap": 5e-4})
             for i, p in enumerate(points)]  # fmt: skip
-    fits.insert(2, ScreenFit(_candidate(m, "cubic_spring at point 4"), {}, 1000, 1, 0.0, 0.0))
+    fits.insert(2, _screened(m, "cubic_spring at point 4"))
     best_cand = fits[0].candidate
     names = best_cand.parameter_names()
     fitted = {names["k_c"]: 9.2e5, names["v"]: 52.5, names["gap"]: 8.4e-4,
@@ -203,10 +206,9 @@ def test_at_an_unmeasured_location_the_simplest_of_the_next_laws_go_on(reference
 
     class Screen:
         def refined(self, f):
-            return ScreenFit(f.candidate, {}, 1000, 1, refined[f.candidate.label],
-                             refined[f.candidate.label], refined=True)  # fmt: skip
+            return _screened(m, f.candidate.label, refined[f.candidate.label], refined=True)
 
-    fits = [ScreenFit(_candidate(m, label), {}, 1000, 1, 0.0, 0.0) for label in refined]
+    fits = [_screened(m, label) for label in refined]
     lead = fits[0].candidate
     laws = _other_laws(Screen(), fits, lead, [lead, fits[-1].candidate], 2)
     assert [f.candidate.label for f in laws] == ["cubic_spring at mounts",
