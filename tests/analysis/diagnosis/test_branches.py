@@ -33,6 +33,39 @@ def test_derivatives_are_those_of_the_chosen_solutions(runs, reference_model) ->
     assert np.nanpercentile(err, 95) < 1e-2  # away from switches the derivative is exact
 
 
+def test_the_same_model_at_the_same_steps_is_solved_once(runs, reference_model, monkeypatch):
+    """A fit evaluates its accepted iterate once more for the derivatives: that second call
+    reuses the solutions (the answer a fresh predictor gives, bit for bit); another value,
+    other steps or another damping is solved anew."""
+    import dataclasses
+
+    data = runs("two_sided_stop")
+    sweeps = []
+    real = predict_branches.solve_steps
+    monkeypatch.setattr(predict_branches, "solve_steps",
+                        lambda *a, **k: sweeps.append(1) or real(*a, **k))  # fmt: skip
+    pred = BranchMatchedPredictor(reference_model, data)
+    gap = reference_model.parameters["gap"].value
+    rows = np.arange(data.n_steps // 2)
+    pred.predict({"gap": 1.1 * gap}, rows=rows)
+    n = len(sweeps)
+    assert n > 0
+    again = pred.predict({"gap": 1.1 * gap}, ["gap"], rows=rows)
+    assert len(sweeps) == n
+    fresh = BranchMatchedPredictor(reference_model, data).predict({"gap": 1.1 * gap}, ["gap"],
+                                                                  rows=rows)  # fmt: skip
+    np.testing.assert_array_equal(again.frf, fresh.frf)
+    np.testing.assert_array_equal(again.d_frf["gap"], fresh.d_frf["gap"])
+    for values, at in (({"gap": 1.2 * gap}, rows), ({"gap": 1.2 * gap}, rows[:-1])):
+        k = len(sweeps)
+        pred.predict(values, rows=at)
+        assert len(sweeps) > k
+    k = len(sweeps)
+    damping = dataclasses.replace(reference_model.damping, default_zeta=0.02)
+    pred.solve(pred.model.with_values({"gap": 1.2 * gap}).with_damping(damping), rows=rows[:-1])
+    assert len(sweeps) > k
+
+
 def _fold_run(path, model, force: np.ndarray) -> tuple[object, int]:
     """A noise-free up-sweep at constant ``force`` whose last step before the jump sits on the
     branch past the fold (where a voltage-driven rig can hold a force-driven model's unstable
