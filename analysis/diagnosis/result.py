@@ -49,7 +49,7 @@ class DiagnosisSettings:
         Levenberg-Marquardt iterations per verification.
     verify_seconds : float
         Processor time allowed for one verification's Levenberg-Marquardt (its last iterate
-        is scored; processor time, so a diagnosis does the same work on a busy machine).
+        is scored; processor time, so other processes on the machine do not cut it short).
     continue_seconds, continue_decrease : float
         When no candidate explains the misfit, the (at most two) verifications stopped for
         time while their last iteration still lowered the metric by ``continue_decrease`` or
