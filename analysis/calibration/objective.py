@@ -104,6 +104,14 @@ class FRFObjective:
         )
         return r, J
 
+    def cost_of(self, pred) -> float:
+        """``delta / 2`` of a prediction made at this objective's steps (``inf`` where a step
+        did not converge): the metric of a model already predicted, without solving again."""
+        if not pred.converged[self.rows].all():
+            return np.inf
+        r = self._stack(pred.frf - self.H)
+        return 0.5 * float(r @ r)
+
     def cost(self, theta: np.ndarray) -> float:
         """``delta / 2`` at ``theta`` (``inf`` where infeasible)."""
         r, _ = self(theta, False)

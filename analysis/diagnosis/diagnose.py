@@ -22,12 +22,14 @@
    best picks at unmeasured locations (a group of springs, a joint); each recalibrated by
    Levenberg-Marquardt from the screen's (or the linear test's) values, at most ``workers``
    at a time. The picks at unmeasured locations are dropped once a verified candidate
-   is at the noise or the stage has used ``time_budget_s`` of processor time. If none
-   explains it: the fits that went most of the way go on with their weights recomputed
-   (and, while processor time is left, those stopped for time while still falling fast).
-   Then, if the best sits at a measured point, its law at the screen's next measured points,
-   started from its fit (a neighbour can explain a strong effect nearly to the noise), or,
-   at an unmeasured location and not at the noise, the simplest of the next laws there. If
+   is at the noise or the stage has used ``time_budget_s`` of processor time. A fit that
+   went most of the way but not to the explained level goes on with its weights recomputed
+   as soon as it finishes (beside the stage's last verifications); if none explains it, so
+   do, while processor time is left, those stopped for time while still falling fast.
+   Then, if the best sits at a measured point and explains the misfit or went most of the
+   way, its law at the screen's next measured points, started from its fit (a neighbour can
+   explain a strong effect nearly to the noise), or, at an unmeasured location and not at
+   the noise, the simplest of the next laws there. If
    none explains it, then, while time is left, the next laws, the best of each law family
    the evidence points at, and further starts for the best two. Every limit is processor
    time, so other processes on the machine do not cut a diagnosis short (the processor time
@@ -86,33 +88,56 @@ def _linear_steps(pred: BranchMatchedPredictor) -> np.ndarray:
     return out
 
 
-def _run_verifications(ex, jobs: list[VerifyJob], essential: int, enough, workers: int) -> dict:
+def _run_verifications(ex, jobs: list[VerifyJob], essential: int, enough, workers: int,
+                       follow=None) -> tuple[dict, dict]:  # fmt: skip
     """Run verification jobs (on ``ex``, at most ``workers`` at a time, or in this process)
-    in order; once ``enough`` of the results so far holds, the jobs after the first
-    ``essential`` not yet started are dropped. Returns ``{index: Verified}`` of the jobs run,
-    in job order."""
+    in order; the jobs after the first ``essential`` start once those are in, and are dropped
+    once ``enough`` of the results so far holds (so which run does not depend on which
+    finished first). ``follow(i, result)`` may return a further job
+    for a finished one (a fit that went most of the way goes on at once, ahead of the jobs
+    not yet started, instead of after all of them).
+
+    Returns ``{index: Verified}`` of the jobs run, in job order, and ``{index: Verified}`` of
+    the further jobs."""
     out: dict[int, Verified] = {}
+    further: dict[int, Verified] = {}
+
+    def next_of(i: int):
+        return None if follow is None else follow(i, out[i])
+
     if ex is None:
         for i, job in enumerate(jobs):
-            if i >= essential and enough(list(out.values())):
+            if i >= essential and enough([*out.values(), *further.values()]):
                 break
             out[i] = run_verify(job)
-        return out
+            if (nxt := next_of(i)) is not None:
+                further[i] = run_verify(nxt)
+        return out, further
     running: dict = {}
     queue = list(enumerate(jobs))
     while queue or running:
         while queue and len(running) < workers:
-            i, job = queue.pop(0)
-            if i >= essential and enough(list(out.values())):
-                queue.clear()
-                break
-            running[ex.submit(run_verify, job)] = i
+            i, job = queue[0]
+            if i >= essential:
+                if any(j < essential and not f for j, f in running.values()):
+                    break  # the essential ones first: what follows depends on them all
+                if enough([*out.values(), *further.values()]):
+                    queue.clear()
+                    break
+            queue.pop(0)
+            running[ex.submit(run_verify, job)] = (i, False)
         if not running:
             break
         finished, _ = wait(running, return_when=FIRST_COMPLETED)
         for f in finished:
-            out[running.pop(f)] = f.result()
-    return dict(sorted(out.items()))
+            i, is_further = running.pop(f)
+            if is_further:
+                further[i] = f.result()
+                continue
+            out[i] = f.result()
+            if (nxt := next_of(i)) is not None:
+                running[ex.submit(run_verify, nxt)] = (i, True)
+    return dict(sorted(out.items())), further
 
 
 class _Later:
@@ -241,16 +266,19 @@ def _walk_jobs(best, fits: list[ScreenFit], tried, n: int):
     return [(f, values, known) for f in _other_points(fits, cand, tried)[:n]]
 
 
-def _walk_to(lead, best_rms: float, st: DiagnosisSettings) -> str | None:
-    """Where the best verified candidate (``lead``, its origin) walks after the first
-    verifications: ``"points"`` (its law at the next measured points) from a measured point
-    whatever its residual, ``"laws"`` (the next laws there) from an unmeasured location not at
-    the noise, else None (a linear candidate has nowhere to walk)."""
+def _walk_to(lead, best: Verified, refit: Verified, st: DiagnosisSettings) -> str | None:
+    """Where the best verified candidate (``lead``, its origin; ``best``, its verification)
+    walks after the first verifications: ``"points"`` (its law at the next measured points)
+    from a measured point when it explains the misfit or went most of the way
+    (:func:`_promising`; a law that explains little at its point explains little at the
+    next), ``"laws"`` (the next laws there) from an unmeasured location not at the noise, else
+    None (a linear candidate has nowhere to walk)."""
     if not isinstance(lead, ScreenFit):
         return None
+    rms = best.rms_over_noise()
     if lead.candidate.location.kind == "point":
-        return "points"
-    return "laws" if best_rms > st.adequate_rms else None
+        return "points" if rms <= st.explained_rms or _promising(best, refit, st) else None
+    return "laws" if rms > st.adequate_rms else None
 
 
 def _promising(v: Verified, refit: Verified, st: DiagnosisSettings) -> bool:
@@ -259,8 +287,9 @@ def _promising(v: Verified, refit: Verified, st: DiagnosisSettings) -> bool:
 
 
 def _to_continue(done: list[Verified], refit: Verified, st: DiagnosisSettings,
-                 time_left: bool) -> list[int]:  # fmt: skip
-    """The (at most two, best first) verifications that go on from where they stopped.
+                 time_left: bool, continued=()) -> list[int]:  # fmt: skip
+    """The verifications that go on from where they stopped: at most two (best first) with
+    those in ``continued`` (gone on already, as soon as they finished: :func:`_goes_on_at_once`).
 
     A strong effect's fit may need longer than the time a verification has: those stopped for
     time while still lowering the metric fast go on while the stage has time; those that went
@@ -269,9 +298,27 @@ def _to_continue(done: list[Verified], refit: Verified, st: DiagnosisSettings,
     reaches: the start model's tangents can stall a fit above the noise near a jump (the
     clamp's friction at 3.4 x the noise's chi-square, 1.16 one iteration after reweighting).
     """
-    going = [i for i, v in enumerate(done) if not v.failed and (_promising(v, refit, st) or (
-        v.stopped and v.last_decrease() >= st.continue_decrease and time_left))]  # fmt: skip
-    return sorted(going, key=lambda i: done[i].chi2_per_dof())[:2]
+    going = [i for i, v in enumerate(done) if i not in continued and not v.failed and (
+        _promising(v, refit, st) or (v.stopped and v.last_decrease() >= st.continue_decrease
+                                     and time_left))]  # fmt: skip
+    return sorted(going, key=lambda i: done[i].chi2_per_dof())[: max(2 - len(continued), 0)]
+
+
+def _goes_on_at_once(v: Verified, refit: Verified, st: DiagnosisSettings) -> bool:
+    """A verification that went most of the way but not to the explained level goes on as
+    soon as it finishes (:func:`_to_continue` would take it after the stage in any case): on
+    two processors its continuation then runs beside the stage's last verification, not
+    after it."""
+    return not v.failed and _promising(v, refit, st) and v.rms_over_noise() > st.explained_rms
+
+
+def _merge(done: list[Verified], i: int, v: Verified) -> None:
+    """Take the continuation ``v`` of ``done[i]`` if it is better, with the history of both."""
+    if v.chi2_per_dof() < done[i].chi2_per_dof():
+        v.seconds += done[i].seconds
+        v.cpu_seconds += done[i].cpu_seconds
+        v.history = done[i].history + v.history
+        done[i] = v
 
 
 def _other_laws(screen: Screen, fits: list[ScreenFit], cand: Candidate, tried,
@@ -431,9 +478,25 @@ def diagnose(
                 spent >= st.time_budget_s
             )
 
-        ran = _run_verifications(ex, jobs, essential, enough, st.workers)
+        def go_on(cand: Candidate | None, v: Verified) -> VerifyJob:
+            job = verify_job(cand, start_toml=v.model_toml)
+            return dataclasses.replace(job, max_seconds=st.continue_seconds, reweight_passes=1)
+
+        early: list[int] = []
+
+        def follow(i: int, v: Verified) -> VerifyJob | None:
+            if len(early) >= 2 or not _goes_on_at_once(v, refit, st):
+                return None
+            early.append(i)
+            say("continue", {"n": 1, "rms_over_noise": v.rms_over_noise()})
+            return go_on(jobs[i].candidate, v)
+
+        ran, further = _run_verifications(ex, jobs, essential, enough, st.workers, follow)
         origin = [origin[i] for i in ran]
         done = [v for v in ran.values()]
+        for i, v in further.items():
+            _merge(done, list(ran).index(i), v)
+        early = [list(ran).index(i) for i in further]
         say("verified", {"n": len(done), "best_rms": _best_rms(done)})
 
         def left() -> float:
@@ -443,27 +506,23 @@ def diagnose(
         def unexplained() -> bool:
             return _best_rms(done) > st.explained_rms
 
-        # the fits that went most of the way go on (:func:`_to_continue`); then the best: at a
-        # measured point, its law at the next points by the screen, from the best's fit (the
-        # screen can rank a strong effect's true point third or fourth, and a neighbour can
-        # explain it nearly to the noise: the contact at the point next to the second stop
-        # reached 1.27 x noise in one run, 1.66 in another, the stop's own point 1.01); at an
-        # unmeasured location, if the best is not at the noise, the next laws there
-        going = _to_continue(done, refit, st, left() > 0) if unexplained() else []
+        # the fits still falling fast go on (:func:`_to_continue`; those that went most of the
+        # way went on as soon as they finished); then the best: at a measured point, if it
+        # explains the misfit or went most of the way, its law at the next points by the
+        # screen, from the best's fit (the screen can rank a strong effect's true point third
+        # or fourth, and a neighbour can explain it nearly to the noise: the contact at the
+        # point next to the second stop reached 1.27 x noise in one run, 1.66 in another, the
+        # stop's own point 1.01); at an unmeasured location, if the best is not at the noise,
+        # the next laws there
+        going = _to_continue(done, refit, st, left() > 0, early) if unexplained() else []
         if going:
             say("continue", {"n": len(going)})
-        cont = [_Later(ex, run_verify, dataclasses.replace(
-            verify_job(origin[i].candidate, start_toml=done[i].model_toml),
-            max_seconds=st.continue_seconds, reweight_passes=1)) for i in going]  # fmt: skip
+        cont = [_Later(ex, run_verify, go_on(origin[i].candidate, done[i])) for i in going]
         for i, p in zip(going, cont, strict=True):
-            v = p.result()
-            if v.chi2_per_dof() < done[i].chi2_per_dof():
-                v.seconds += done[i].seconds
-                v.history = done[i].history + v.history
-                done[i] = v
+            _merge(done, i, p.result())
         ranked = [i for i in np.argsort([v.chi2_per_dof() for v in done]) if not done[i].failed]
         lead = origin[ranked[0]] if ranked else None
-        walk_to = _walk_to(lead, _best_rms(done), st)
+        walk_to = _walk_to(lead, done[ranked[0]] if ranked else None, refit, st)
         if walk_to:
             tried = [o.candidate for o in origin]
             if walk_to == "points":

@@ -329,7 +329,14 @@ def refit(
         costs = [np.nan]  # one start: its metric is Levenberg-Marquardt's first evaluation
     else:
         for i, th in enumerate(thetas):
-            costs.append(obj.cost(th))
+            if (
+                i == 0
+                and good.size == rows.size
+                and np.allclose(space.to_physical(th), p0, rtol=1e-12, atol=0)
+            ):
+                costs.append(obj.cost_of(base))  # the start model itself, predicted above
+            else:
+                costs.append(obj.cost(th))
             if progress:
                 progress("start", {"index": i, "n": len(thetas), "cost": costs[-1]})
     costs = np.array(costs)

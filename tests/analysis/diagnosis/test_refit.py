@@ -73,3 +73,24 @@ def test_a_hopeless_candidate_gives_up_after_one_iteration_when_far_above_the_ba
     assert run([400.0, 150.0, 140.0]) == 2  # above the bar but under twice it: two
     assert run([400.0, 190.0, 90.0, 85.0]) is None  # halving, then under the bar
     assert run([4000.0, 1900.0, 900.0]) is None  # far above, but halving every time
+
+
+def test_the_start_model_is_not_solved_again_to_rank_the_starts(
+    runs, reference_model, monkeypatch
+) -> None:
+    """With further starts, the metric of the start model itself comes from the prediction
+    the fit makes there anyway (for its weights): the same value as Levenberg-Marquardt's own
+    first evaluation of it (to 1e-9), with one solution fewer (the further start: the
+    contact's stiffness at 1.2 times the model's)."""
+    from analysis.calibration.objective import FRFObjective
+
+    data = runs("damper_p5")
+    k = reference_model.parameters["k_c"].value
+    calls = []
+    cost = FRFObjective.cost
+    monkeypatch.setattr(FRFObjective, "cost", lambda self, th: calls.append(th) or cost(self, th))
+    two = refit(reference_model, data, ["k_c"], starts=[{"k_c": 1.2 * k}], max_iterations=1)
+    assert len(calls) == 1  # the further start only
+    one = refit(reference_model, data, ["k_c"], max_iterations=1)
+    assert one.start_costs[0] == pytest.approx(two.start_costs[0], rel=1e-9)
+    assert two.start_costs[1] > two.start_costs[0]  # the model's own k_c fits better
