@@ -23,6 +23,7 @@ from analysis.calibration.lm import LeastSquaresResult, least_squares_lm
 from analysis.calibration.objective import FRFObjective
 from analysis.calibration.parameters import ParameterSpace
 from analysis.measurement_file import SteppedSineData
+from analysis.mhb.solver import solve_point
 from analysis.model import Model
 from analysis.predict_branches import BranchMatchedPredictor
 
@@ -72,7 +73,9 @@ ZETA = "zeta_"
 
 class _DampedPredictor(BranchMatchedPredictor):
     """A predictor whose parameters may include modal damping ratios (``zeta_<mode>``),
-    differentiated by finite differences (one further solution per ratio)."""
+    differentiated by finite differences: each step solved again with the ratio shifted,
+    started from its solution (Newton stays on the chosen branch and needs a few iterations;
+    solving the sweeps again would cost a whole prediction and could take another branch)."""
 
     def predict(self, values=None, params=(), rows=None):
         values = dict(values or {})
@@ -89,21 +92,40 @@ class _DampedPredictor(BranchMatchedPredictor):
             pred = super().predict(values, plain, rows)
             for n in params:
                 if n.startswith(ZETA):
-                    h = 1e-3 * zetas[n]
-                    per_mode = dict(self.model.damping.per_mode)
-                    per_mode[int(n[len(ZETA) :])] = zetas[n] + h
-                    keep = self.model
-                    self.model = keep.with_damping(
-                        dataclasses.replace(keep.damping, per_mode=per_mode)
-                    )
-                    try:
-                        shifted = super().predict(values, (), rows)
-                    finally:
-                        self.model = keep
-                    pred.d_frf[n] = (shifted.frf - pred.frf) / h
+                    pred.d_frf[n] = self._zeta_derivative(values, rows, pred, n, zetas[n])
             return pred
         finally:
             self.model = base_model
+
+    def _zeta_derivative(self, values, rows, pred, name: str, zeta: float) -> np.ndarray:
+        """``d frf / d zeta`` by a forward difference of ``1e-3 zeta``, each step solved from
+        its solution (steps where that fails: the sweeps solved again at the shifted ratio)."""
+        model = self.model.with_values(values) if values else self.model
+        _, points = self.solve(model, rows=rows)  # the solutions just made (kept)
+        h = 1e-3 * zeta
+        per_mode = {**model.damping.per_mode, int(name[len(ZETA) :]): zeta + h}
+        shifted = model.with_damping(dataclasses.replace(model.damping, per_mode=per_mode))
+        pb = self.problem(shifted)
+        out = np.full_like(pred.frf, np.nan)
+        lost = []
+        for row, p in points.items():
+            if not p.converged:
+                continue
+            force = self._force_sign * self.drive_force[row][:, None]
+            q = solve_point(pb, p.omega, force, X0=p.X)
+            if q.converged:
+                out[row] = (self.frf_of(row, q)[0] - pred.frf[row]) / h
+            else:
+                lost.append(row)
+        if lost:
+            keep = self.model
+            self.model = keep.with_damping(shifted.damping)
+            try:
+                again = BranchMatchedPredictor.predict(self, values, (), rows)
+            finally:
+                self.model = keep
+            out[lost] = (again.frf[lost] - pred.frf[lost]) / h
+        return out
 
     def _linear_model(self, model):
         key = (tuple(sorted(model.damping.per_mode.items())), model.damping.default_zeta)
