@@ -91,9 +91,9 @@ def _linear_steps(pred: BranchMatchedPredictor) -> np.ndarray:
 def _run_verifications(ex, jobs: list[VerifyJob], essential: int, enough, workers: int,
                        follow=None) -> tuple[dict, dict]:  # fmt: skip
     """Run verification jobs (on ``ex``, at most ``workers`` at a time, or in this process)
-    in order; the jobs after the first ``essential`` start once those are in, and are dropped
-    once ``enough`` of the results so far holds (so which run does not depend on which
-    finished first). ``follow(i, result)`` may return a further job
+    in order; the jobs after the first ``essential`` start one at a time once the jobs before
+    them are in, and are dropped once ``enough`` of the results so far holds (so which run
+    does not depend on which finished first). ``follow(i, result)`` may return a further job
     for a finished one (a fit that went most of the way goes on at once, ahead of the jobs
     not yet started, instead of after all of them).
 
@@ -119,8 +119,9 @@ def _run_verifications(ex, jobs: list[VerifyJob], essential: int, enough, worker
         while queue and len(running) < workers:
             i, job = queue[0]
             if i >= essential:
-                if any(j < essential and not f for j, f in running.values()):
-                    break  # the essential ones first: what follows depends on them all
+                if any(not f for _, f in running.values()):
+                    # one at a time after the essential ones: each depends on all before it
+                    break
                 if enough([*out.values(), *further.values()]):
                     queue.clear()
                     break
