@@ -28,6 +28,10 @@ of chi-square per degree of freedom on the whole file with its uncertainties) an
 ``final_over_noise``), ``negative_control_claims`` (claims made for ``reference`` and
 ``hysteretic_joint``, whose effect is outside the library) and ``total_s`` (calibrations,
 diagnoses and augmentations); per truth the details (``details``) with the times of each part.
+The machine's speed drifts (the same calibration took up to 45 % longer twenty minutes
+later): just before each diagnosis the paper sweep of :mod:`benchmarks.mhb` is timed
+(``paper_sweep_s``, its range over the cases at the top level), and each diagnosis is also
+given in those sweeps (``diagnosis_in_sweeps``).
 """
 
 from __future__ import annotations
@@ -62,6 +66,7 @@ from analysis.mhb.solver import NewtonSettings
 from analysis.mhb.sweep import solve_steps
 from analysis.model import load_model
 from analysis.system import attachments, build_problem_dofs
+from benchmarks.mhb import paper_sweep_s
 from sim_backend.sizing import paper_frequencies
 from sim_backend.truth import TRUTH_DIR, load_truth
 
@@ -402,6 +407,7 @@ def run_case(truth: str, folder: Path, *, quick: bool = False, seed: int = 0) ->
     t0 = time.perf_counter()
     model, data = calibrate_paper_way(stepped, linear, n_starts=12 if quick else 30, seed=seed)
     model.save(folder / f"{truth}_calibrated.toml")
+    sweep_s = paper_sweep_s()  # the machine's speed just before the diagnosis
     t1 = time.perf_counter()
     diag = diagnose(model, data, linear_run=linear, settings=DiagnosisSettings())
     t2 = time.perf_counter()
@@ -413,6 +419,8 @@ def run_case(truth: str, folder: Path, *, quick: bool = False, seed: int = 0) ->
         "data_s": round(s_data + l_data, 1),
         "calibration_s": round(t1 - t0, 1),
         "diagnosis_s": round(t2 - t1, 1),
+        "paper_sweep_s": round(sweep_s, 3),
+        "diagnosis_in_sweeps": round((t2 - t1) / sweep_s),
     }
     print(f"--- {truth}: {diag.verdict} (diagnosis {t2 - t1:.1f} s)")
     print(diag.summary())
@@ -454,6 +462,10 @@ def run(quick: bool = False) -> dict:
         "total_s": round(sum(d["total_s"] for d in details), 1),
         "data_s": round(sum(d["data_s"] for d in details), 1),
         "max_diagnosis_s": max(d["diagnosis_s"] for d in details),
+        "paper_sweep_s": [
+            min(d["paper_sweep_s"] for d in details),
+            max(d["paper_sweep_s"] for d in details),
+        ],  # fmt: skip
         "details": details,
     }
 

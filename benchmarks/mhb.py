@@ -39,22 +39,38 @@ def _force(level: float) -> np.ndarray:
     return np.array([level, 0.02 * level, 0.02 * level])
 
 
-def run(quick: bool = False) -> dict:
+def _paper_problem():
+    """The calibrated rig's linear model and balance problem (analysis defaults)."""
     model = load_model().with_values(PAPER_VALUES)
-    t0 = time.perf_counter()
     lin = build_linear(model, f_max_hz=600.0)
-    pb = build_problem(model, linear=lin)
-    setup_s = time.perf_counter() - t0
-    freqs = paper_frequencies_hz()
-    omega = 2 * np.pi * freqs
+    return lin, build_problem(model, linear=lin)
+
+
+def _time_sweeps(pb, repeats: int):
+    """The paper sweep at every level ``repeats`` times: (the last sweeps, median wall time)."""
+    omega = 2 * np.pi * paper_frequencies_hz()
     solve_steps(pb, omega[:5], _force(2.0))  # warm-up (imports, caches)
-    repeats = 1 if quick else 5
     sweeps, times = [], []
     for _ in range(repeats):
         t0 = time.perf_counter()
         sweeps = [solve_steps(pb, omega, _force(level)) for level in LEVELS_N]
         times.append(time.perf_counter() - t0)
-    sweep_s = float(np.median(times))
+    return sweeps, float(np.median(times))
+
+
+def paper_sweep_s(repeats: int = 3) -> float:
+    """Wall time of the paper sweep (median of ``repeats``): the machine's present speed at
+    the balance, for other benchmarks to state their times against."""
+    return _time_sweeps(_paper_problem()[1], repeats)[1]
+
+
+def run(quick: bool = False) -> dict:
+    t0 = time.perf_counter()
+    lin, pb = _paper_problem()
+    setup_s = time.perf_counter() - t0
+    freqs = paper_frequencies_hz()
+    repeats = 1 if quick else 5
+    sweeps, sweep_s = _time_sweeps(pb, repeats)
     n_points = sum(len(s.points) for s in sweeps)
     converged = sum(int(s.converged.sum()) for s in sweeps)
     print(
