@@ -465,7 +465,7 @@ def run(quick: bool = False) -> dict:
         "paper_sweep_s": [
             min(d["paper_sweep_s"] for d in details),
             max(d["paper_sweep_s"] for d in details),
-        ],  # fmt: skip
+        ],
         "details": details,
     }
 

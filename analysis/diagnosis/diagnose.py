@@ -483,21 +483,21 @@ def diagnose(
             job = verify_job(cand, start_toml=v.model_toml)
             return dataclasses.replace(job, max_seconds=st.continue_seconds, reweight_passes=1)
 
-        early: list[int] = []
+        gone_on: list[int] = []
 
         def follow(i: int, v: Verified) -> VerifyJob | None:
-            if len(early) >= 2 or not _goes_on_at_once(v, refit, st):
+            if len(gone_on) >= 2 or not _goes_on_at_once(v, refit, st):
                 return None
-            early.append(i)
+            gone_on.append(i)
             say("continue", {"n": 1, "rms_over_noise": v.rms_over_noise()})
             return go_on(jobs[i].candidate, v)
 
+        # the jobs run are the first len(ran), in order: their indices are their positions
         ran, further = _run_verifications(ex, jobs, essential, enough, st.workers, follow)
-        origin = [origin[i] for i in ran]
-        done = [v for v in ran.values()]
+        origin = origin[: len(ran)]
+        done = list(ran.values())
         for i, v in further.items():
-            _merge(done, list(ran).index(i), v)
-        early = [list(ran).index(i) for i in further]
+            _merge(done, i, v)
         say("verified", {"n": len(done), "best_rms": _best_rms(done)})
 
         def left() -> float:
@@ -515,7 +515,7 @@ def diagnose(
         # point next to the second stop reached 1.27 x noise in one run, 1.66 in another, the
         # stop's own point 1.01); at an unmeasured location, if the best is not at the noise,
         # the next laws there
-        going = _to_continue(done, refit, st, left() > 0, early) if unexplained() else []
+        going = _to_continue(done, refit, st, left() > 0, list(further)) if unexplained() else []
         if going:
             say("continue", {"n": len(going)})
         cont = [_Later(ex, run_verify, go_on(origin[i].candidate, done[i])) for i in going]
