@@ -22,35 +22,11 @@ __all__ = [
 ]
 
 
-def power_basis(
-    x: np.ndarray, powers: tuple[int, ...], signed: bool
-) -> tuple[np.ndarray, np.ndarray]:
-    """Basis functions ``g_j(x)`` and their derivatives for a power series.
-
-    Parameters
-    ----------
-    x : ndarray, shape (...)
-        Samples of the variable.
-    powers : tuple of int
-        Exponents ``n_j >= 1``.
-    signed : bool
-        ``g_j = x |x|^(n_j - 1)`` (odd in ``x``) if true, else ``g_j = x^n_j``.
-
-    Returns
-    -------
-    g, dg_dx : ndarray, shape (len(powers), ...)
-    """
-    ax = np.abs(x) if signed else x
-    g = np.stack([x * ax ** (n - 1) for n in powers])
-    dg = np.stack([n * np.abs(x) ** (n - 1) if signed else n * x ** (n - 1) for n in powers])
-    return g, dg
-
-
 class PowerSeriesElement(NonlinearElement):
     """Base of laws ``f = -sum_j p_j g_j(x)``, one parameter per power (not registered).
 
     ``x`` is ``u`` (springs) or ``v`` (dampers, ``on_velocity = True``); ``g_j`` is ``x^n_j``,
-    or ``x |x|^(n_j - 1)`` if ``signed`` (see :func:`power_basis`). Subclasses set ``powers``
+    or ``x |x|^(n_j - 1)`` if ``signed``. Subclasses set ``powers``
     in ``param_names`` order. The laws are smooth (``x |x|`` is once differentiable at 0 with
     derivative 0), so the derivatives are exact everywhere; ``df_dp_j = -g_j(x)``.
     """
@@ -61,12 +37,17 @@ class PowerSeriesElement(NonlinearElement):
 
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
         x = v if self.on_velocity else u
-        g, dg = power_basis(x, self.powers, self.signed)
-        f = -np.tensordot(self._p, g, axes=1)
-        df_dx = -np.tensordot(self._p, dg, axes=1)
+        ax = np.abs(x) if self.signed else x
+        f, df_dx = np.zeros_like(x), np.zeros_like(x)
+        g = []
+        for p, n in zip(self._p, self.powers, strict=True):
+            a = ax ** (n - 1)  # g = x a, dg/dx = n a (signed or not)
+            g.append(x * a)
+            f -= p * g[-1]
+            df_dx -= (n * p) * a
         zero = np.zeros_like(x)
         df_du, df_dv = (zero, df_dx) if self.on_velocity else (df_dx, zero)
-        return ElementEval(f, df_du, df_dv, -g if want_params else None)
+        return ElementEval(f, df_du, df_dv, -np.stack(g) if want_params else None)
 
 
 @register

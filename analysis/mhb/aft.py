@@ -11,68 +11,115 @@ contribution is integrated: the sampled sum puts the jump at the cell boundary `
 kink), with its exact derivatives. The residual
 becomes continuous, Newton converges to its tolerance and the Jacobian includes the jump term
 ``J phi(tau*) e(tau*)^T / u'(tau*)`` (the delta function of ``df/du`` at the jump).
+
+The crossings and the jump integrals are a handful of numbers per crossing, computed by small
+loops compiled with numba (in numpy they were some fifty calls on arrays of two, most of the
+time of a contact model's balance); the laws themselves stay numpy code.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from analysis.mhb.harmonics import HarmonicBasis
 
 __all__ = ["element_forces", "nonlinear_forces", "parameter_forces"]
 
-
-def _rows(b: HarmonicBasis, tau: np.ndarray, second: bool = True):
-    """Basis rows and their first (and second) tau-derivatives, each shape (n, 2H+1)."""
-    k = np.arange(1.0, b.n_harmonics + 1)
-    kt = np.multiply.outer(np.atleast_1d(tau), k)
-    c, s = np.cos(kt), np.sin(kt)
-    n = kt.shape[0]
-    e = np.empty((n, b.size))
-    de = np.empty((n, b.size))
-    e[:, 0], de[:, 0] = 1.0, 0.0
-    e[:, 1::2], e[:, 2::2] = c, s
-    ks, kc = k * s, k * c
-    de[:, 1::2], de[:, 2::2] = -ks, kc
-    if not second:
-        return e, de, None
-    dde = np.empty((n, b.size))
-    dde[:, 0] = 0.0
-    dde[:, 1::2], dde[:, 2::2] = -k * kc, -k * ks
-    return e, de, dde
+_NONE = np.zeros((0, 0))  # a derivative not wanted (the kernels skip size-0 arrays)
 
 
-def _weights(b: HarmonicBasis) -> np.ndarray:
-    """Integral weights: coefficient c = w[c] * integral over the period of f * phi_c dtau."""
-    w = np.full(b.size, 1.0 / np.pi)
-    w[0] = 1.0 / (2 * np.pi)
-    return w
-
-
-def _crossings(b: HarmonicBasis, Ue: np.ndarray, u_t: np.ndarray, u_s: float):
+@njit(cache=True)
+def _locate_jumps(tau, k, Ue, u_t, u_s):
     """Threshold crossings between consecutive samples, refined on the Fourier series.
 
-    Returns the sample index before each crossing, shape (n_c,), and the phase, shape (n_c,).
+    Each sign change of ``u_t - u_s`` (cyclic) starts at the chord's root and takes one
+    Newton step on ``u(tau) - u_s`` (error O(dtau^4)), kept inside its cell.
+
+    Returns
+    -------
+    idx : ndarray of int, shape (n_c,)
+        Sample before each crossing.
+    t : ndarray, shape (n_c,)
+        Phase of the crossing.
+    rows : ndarray, shape (2, n_c, 2H+1)
+        Basis rows ``phi(t)`` and their tau-derivatives.
+    up, upp : ndarray, shape (n_c,)
+        ``du/dtau`` and ``d2u/dtau2`` there. Crossings with ``du/dtau = 0`` (tangent to the
+        threshold, no jump to integrate) are left out.
     """
-    g = u_t - u_s
-    above = g > 0
-    change = np.empty(above.size, bool)
-    np.not_equal(above[:-1], above[1:], out=change[:-1])
-    change[-1] = above[-1] != above[0]
-    idx = np.flatnonzero(change)
-    dtau = 2 * np.pi / b.n_time
-    if idx.size == 0:
-        return idx, np.zeros(0)
-    g0, g1 = g[idx], g[(idx + 1) % g.size]
-    lo = b.tau[idx]
-    t = lo + dtau * g0 / (g0 - g1)
-    for _ in range(1):  # Newton on u(tau) - u_s from the chord: error O(dtau^4)
-        e, de, _ = _rows(b, t, second=False)
-        d = de @ Ue
-        ok = d != 0
-        t = np.where(ok, t - (e @ Ue - u_s) / np.where(ok, d, 1.0), t)
-        t = np.clip(t, lo, lo + dtau)
-    return idx, t
+    N, H = u_t.size, k.size
+    dtau = 2.0 * np.pi / N
+    idx = np.empty(N, np.int64)
+    n = 0
+    for m in range(N):
+        if (u_t[m] > u_s) != (u_t[(m + 1) % N] > u_s):
+            idx[n] = m
+            n += 1
+    t = np.empty(n)
+    rows = np.zeros((2, n, Ue.size))
+    up = np.empty(n)
+    upp = np.empty(n)
+    kept = 0
+    for c in range(n):
+        m = idx[c]
+        g0, g1 = u_t[m] - u_s, u_t[(m + 1) % N] - u_s
+        lo = tau[m]
+        tc = lo + dtau * g0 / (g0 - g1)
+        u, d = Ue[0], 0.0
+        for h in range(H):
+            ch, sh = np.cos(k[h] * tc), np.sin(k[h] * tc)
+            a, b = Ue[2 * h + 1], Ue[2 * h + 2]
+            u += a * ch + b * sh
+            d += k[h] * (b * ch - a * sh)
+        if d != 0.0:
+            tc -= (u - u_s) / d
+        tc = min(max(tc, lo), lo + dtau)
+        rows[0, kept, 0] = 1.0
+        d, dd = 0.0, 0.0
+        for h in range(H):
+            ch, sh = np.cos(k[h] * tc), np.sin(k[h] * tc)
+            a, b = Ue[2 * h + 1], Ue[2 * h + 2]
+            rows[0, kept, 2 * h + 1], rows[0, kept, 2 * h + 2] = ch, sh
+            rows[1, kept, 2 * h + 1], rows[1, kept, 2 * h + 2] = -k[h] * sh, k[h] * ch
+            d += k[h] * (b * ch - a * sh)
+            dd -= k[h] * k[h] * (a * ch + b * sh)
+        if d == 0.0:
+            continue
+        idx[kept], t[kept], up[kept], upp[kept] = m, tc, d, dd
+        kept += 1
+    return idx[:kept], t[:kept], rows[:, :kept], up[:kept], upp[:kept]
+
+
+@njit(cache=True)
+def _add_jumps(w, rows, up, upp, offset, J, dJ_dvel, dJ_dp, dus_dp, F, D, dFp):
+    """Add the jumps' integrals and their derivatives to ``F``, ``D`` and ``dFp`` in place.
+
+    The sampled sum puts the jump ``J`` of crossing ``c`` at its cell boundary, ``offset``
+    before the crossing ``tau*``: ``-J offset phi(tau*)`` is added. ``tau*`` moves with the
+    coefficients (``dtau*/dU = -phi / u'``) and with the parameters through the threshold
+    (``dtau*/dp = du_s/dp / u'``); ``J`` changes with the velocity there (``dJ_dvel``, the
+    velocity ``u'`` moving by ``phi' + u'' dtau*``) and with the parameters (``dJ_dp``).
+    ``D`` (``dFp``) of size 0 is not wanted.
+    """
+    nc, s = up.size, w.size
+    for c in range(nc):
+        e, de = rows[0, c], rows[1, c]
+        Js = J[c] * offset[c]
+        for i in range(s):
+            F[i] -= w[i] * e[i] * Js
+        for j in range(D.shape[1]):
+            dt = -e[j] / up[c]
+            dJ = dJ_dvel[c] * (de[j] + upp[c] * dt)
+            a, b = -(dJ * offset[c] + J[c] * dt), -Js * dt
+            for i in range(s):
+                D[i, j] += w[i] * (e[i] * a + de[i] * b)
+        for p in range(dFp.shape[1]):
+            dt = dus_dp[p] / up[c]
+            dJ = dJ_dp[c, p] + dJ_dvel[c] * upp[c] * dt
+            a, b = -(dJ * offset[c] + J[c] * dt), -Js * dt
+            for i in range(s):
+                dFp[i, p] += w[i] * (e[i] * a + de[i] * b)
 
 
 def element_forces(
@@ -102,52 +149,45 @@ def element_forces(
     dFp : ndarray, shape (2H+1, n_params) or None
         ``dF/dp`` (with ``want_params``).
     """
-    u_t = b.E @ Ue
-    v_t = omega_b * (b.dE @ Ue)
+    N = b.n_time
+    uv = b.EdE @ Ue
+    u_t, v_t = uv[:N], omega_b * uv[N:]
+    sw = element.switch_threshold()
+    nc = 0
+    if sw is not None:
+        u_s, dus_dp = sw
+        idx, t, rows, up, upp = _locate_jumps(b.tau, b.k, Ue, u_t, u_s)
+        nc = idx.size
+        if nc:
+            # the samples and both sides of every jump in one evaluation
+            after = np.where(u_t[(idx + 1) % N] > u_s, 1.0, -1.0)
+            eps = 1e-9 * max(abs(u_s), np.abs(u_t).max(), 1e-300)
+            vs = omega_b * up
+            u_t = np.concatenate([u_t, u_s + after * eps, u_s - after * eps])
+            v_t = np.concatenate([v_t, vs, vs])
     ev = element.evaluate(u_t, v_t, want_params)
-    F = b.P @ ev.f
+    F = b.P @ ev.f[:N]
     D = None
     if jacobian:
-        D = b.P @ (ev.df_du[:, None] * b.E + (omega_b * ev.df_dv)[:, None] * b.dE)
-    dFp = (b.P @ ev.df_dp.T) if want_params else None
-    sw = element.switch_threshold()
-    if sw is None:
+        D = (b.PP * np.concatenate([ev.df_du[:N], omega_b * ev.df_dv[:N]])) @ b.EdE
+    dFp = (b.P @ ev.df_dp[:, :N].T) if want_params else None
+    if nc == 0:
         return F, D, dFp
-    u_s, dus_dp = sw
-    idx, t = _crossings(b, Ue, u_t, u_s)
-    if idx.size == 0:
-        return F, D, dFp
-    w = _weights(b)
-    dtau = 2 * np.pi / b.n_time
-    e, de, dde = _rows(b, t)
-    up = de @ Ue  # du/dtau at each crossing, shape (n_c,)
-    keep = up != 0
-    idx, t, e, de, dde, up = idx[keep], t[keep], e[keep], de[keep], dde[keep], up[keep]
-    vs = omega_b * up
-    after = np.where(u_t[(idx + 1) % b.n_time] > u_s, 1.0, -1.0)
-    eps = 1e-9 * max(abs(u_s), np.abs(u_t).max(), 1e-300)
-    both = element.evaluate(
-        np.concatenate([u_s + after * eps, u_s - after * eps]), np.tile(vs, 2), want_params
+    hi, lo = slice(N, N + nc), slice(N + nc, N + 2 * nc)
+    _add_jumps(
+        b.jump_weights,
+        rows,
+        up,
+        upp,
+        t - (b.tau[idx] + np.pi / N),  # from the cell boundary the sum assumes
+        ev.f[hi] - ev.f[lo],
+        omega_b * (ev.df_dv[hi] - ev.df_dv[lo]),
+        (ev.df_dp[:, hi] - ev.df_dp[:, lo]).T if want_params else _NONE,
+        np.asarray(dus_dp, dtype=float),
+        F,
+        _NONE if D is None else D,
+        _NONE if dFp is None else dFp,
     )
-    nc = idx.size
-    J = both.f[:nc] - both.f[nc:]
-    dJ_dv = both.df_dv[:nc] - both.df_dv[nc:]
-    s = t - (b.tau[idx] + 0.5 * dtau)  # offset from the cell boundary the sum assumes
-    phi = e  # phi at tau* (the O(s^2) midpoint term is of the sampling error's order)
-    F += (w * phi).T @ (-J * s)
-    ddU = dde @ Ue
-    if jacobian:
-        dt_dU = -e / up[:, None]  # from u(tau*) = u_s
-        dup_dU = de + ddU[:, None] * dt_dU
-        dJ_dU = (dJ_dv * omega_b)[:, None] * dup_dU
-        D += (w * phi).T @ (-(dJ_dU * s[:, None] + J[:, None] * dt_dU))
-        D += (w * de).T @ (-(J * s)[:, None] * dt_dU)
-    if want_params:
-        dt_dp = np.outer(1.0 / up, dus_dp)  # (n_c, n_params)
-        dup_dp = ddU[:, None] * dt_dp
-        dJ_dp = (both.df_dp[:, :nc] - both.df_dp[:, nc:]).T + (dJ_dv * omega_b)[:, None] * dup_dp
-        dFp += (w * phi).T @ (-(dJ_dp * s[:, None] + J[:, None] * dt_dp))
-        dFp += (w * de).T @ (-(J * s)[:, None] * dt_dp)
     return F, D, dFp
 
 
@@ -172,10 +212,11 @@ def nonlinear_forces(problem, X: np.ndarray, omega_b: float, jacobian: bool = Tr
     dF = np.zeros((s, n, s, n)) if jacobian else None
     for e, att in enumerate(problem.attachments):
         Fe, De, _ = element_forces(b, att.element, U[:, e], omega_b, jacobian)
-        Le = problem.L[e]
-        F += np.outer(Fe, Le)
-        if jacobian:
-            dF += np.einsum("ab,i,j->aibj", De, Le, Le)
+        for i, li in problem.incidence[e]:  # F += outer(Fe, L[e]), dF += De (x) outer(L[e], L[e])
+            F[:, i] += li * Fe
+            if jacobian:
+                for j, lj in problem.incidence[e]:
+                    dF[:, i, :, j] += (li * lj) * De
     return F, (dF.reshape(s * n, s * n) if jacobian else None)
 
 

@@ -58,6 +58,10 @@ class HarmonicBasis:
     E: np.ndarray = field(init=False, repr=False, compare=False)
     dE: np.ndarray = field(init=False, repr=False, compare=False)
     P: np.ndarray = field(init=False, repr=False, compare=False)
+    EdE: np.ndarray = field(init=False, repr=False, compare=False)
+    PP: np.ndarray = field(init=False, repr=False, compare=False)
+    k: np.ndarray = field(init=False, repr=False, compare=False)
+    jump_weights: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         H, N = self.n_harmonics, self.n_time
@@ -82,6 +86,15 @@ class HarmonicBasis:
         object.__setattr__(self, "dE", dE)
         object.__setattr__(self, "P", (E * w).T.copy())
         object.__setattr__(self, "_tau", tau)
+        # for the AFT's hot path: samples of a signal and its tau-derivative in one product,
+        # the projection twice over (for df/du and df/dv), the harmonic numbers
+        object.__setattr__(self, "EdE", np.vstack([E, dE]))
+        object.__setattr__(self, "PP", np.hstack([self.P, self.P]))
+        object.__setattr__(self, "k", k.astype(float))
+        # integral weights: coefficient c = jump_weights[c] * integral of f phi_c over a period
+        jw = np.full(2 * H + 1, 1.0 / np.pi)
+        jw[0] = 0.5 / np.pi
+        object.__setattr__(self, "jump_weights", jw)
 
     @property
     def size(self) -> int:

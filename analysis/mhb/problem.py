@@ -107,6 +107,8 @@ class HarmonicProblem:
             if att.dof_b is not None:
                 L[e, nl.index(att.dof_b)] = -1.0
         self.L = L
+        # the nonzero entries of each row of L: (nl index, sign) pairs
+        self.incidence = [[(i, L[e, i]) for i in np.flatnonzero(L[e])] for e in range(len(L))]
         self.blocks = {
             "nn": self.linear.block(nl, nl) if n else None,
             "nf": self.linear.block(nl, self.force_dofs) if n else None,
