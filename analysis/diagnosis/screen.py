@@ -167,6 +167,7 @@ class _Basis:
         w[0] = 1.0 / n_time
         self.P = np.exp(-1j * np.outer(h, tau)) * w[:, None]  # X = P @ x
         self.order_k = order_k
+        self.other = np.setdiff1d(h, order_k)  # harmonics the file does not measure
         # real coefficient rows/columns of the measured orders
         cols = []
         for k in order_k:
@@ -200,6 +201,15 @@ class _Frame:
     known: list  # (element, pos_a, pos_b, {model p: element p})
     X0: np.ndarray  # (n, H+1, nD) start phasors (the anchor's)
     omega: np.ndarray
+    R_o: np.ndarray | None = field(default=None, repr=False)  # R at the measured orders
+
+
+def _at_orders(fr: _Frame, order_k: np.ndarray) -> np.ndarray:
+    """``fr.R`` at the measured orders, shape (n, K, nD, 1 + nD); taken once per frame (every
+    candidate of a screen fits on it)."""
+    if fr.R_o is None:
+        fr.R_o = fr.R[:, order_k]
+    return fr.R_o
 
 
 class Screen:
@@ -776,9 +786,9 @@ class Screen:
         known = {mp: el.params[ep] for el, _, _, pmap in fr.known for mp, ep in pmap.items()}
         W = st["W"]
         Wr = np.stack([W, W], axis=2).reshape(n, -1)  # (n, 2KC)
-        R_o = fr.R[:, bs.order_k]  # (n, K, nD, 1 + nD)
+        R_o = _at_orders(fr, bs.order_k)  # (n, K, nD, 1 + nD)
         drive = R_o[:, :, :C, 0] * self._F[self.rows][:, :, None]
-        other = np.setdiff1d(np.arange(H1), bs.order_k)
+        other = bs.other
         # incidences where laws act: the model's elements, then the candidate's
         incid = []
         for element, a, b, pmap in fr.known:
@@ -809,10 +819,10 @@ class Screen:
             # once per location, shared by every law there
             whitened = it == 0 and "S0" in st
             g_total = np.zeros((n, H1, len(fr.dofs)), complex)
-            M = np.zeros((n, 2 * K * C, 2 * K * C))
+            M = None if whitened else np.zeros((n, 2 * K * C, 2 * K * C))
             columns, names, lower = [], [], []
             for i, (kind_, law_i, rows, pmap) in enumerate(incid):
-                Xi = np.einsum("nhd,ld->nhl", X, rows)
+                Xi = X @ rows.T
                 if kind_ == "known":
                     th = {ep: known[mp] for mp, ep in pmap.items()}
                     ck = ("known", id(st), i)
@@ -823,7 +833,7 @@ class Screen:
                         if it == 0:
                             st[ck] = (f, Jm, basis)
                     for mp, ep in pmap.items():
-                        columns.append(np.einsum("nhl,ld->nhd", basis[ep], rows))
+                        columns.append(basis[ep] @ rows)
                         names.append(("known_delta" if ep == "gap" else "known", mp))
                         lower.append(-np.inf if ep == "gap" else 0.0)
                 else:
@@ -834,7 +844,7 @@ class Screen:
                         f, Jm_c, basis = self._law_eval(fr, law, Xi, th, True, it > 0)
                         Jm = Jm if Jm_c is None else Jm_c
                         for p in law.linear:
-                            columns.append(np.einsum("nhl,ld->nhd", basis[p], rows))
+                            columns.append(basis[p] @ rows)
                             names.append(("cand", p))
                             lower.append(0.0 if p in law.nonnegative else -np.inf)
                     if joint:
@@ -843,10 +853,10 @@ class Screen:
                             fr, sp, Xi, {"k": theta["k_joint_delta"]}, True
                         )
                         f, Jm = f + fs, Jm + Js
-                        columns.append(np.einsum("nhl,ld->nhd", bsp["k"], rows))
+                        columns.append(bsp["k"] @ rows)
                         names.append(("cand", "k_joint_delta"))
                         lower.append(-np.inf)
-                g_total += np.einsum("nhl,ld->nhd", f, rows)
+                g_total += f @ rows
                 if whitened or (it == 0 and kind_ == "cand"):
                     continue
                 for j, row in enumerate(rows):
@@ -926,12 +936,17 @@ def screen_pass(job: ScreenJob) -> list[ScreenFit]:
 
 
 def _bounded_lsq(A: np.ndarray, y: np.ndarray, lower: np.ndarray):
+    """Least squares ``min |y - A x|`` with ``x >= lower``: the unconstrained solution when it
+    satisfies the bounds (then it is the bounded one: the problem is convex), else BVLS."""
     if A.shape[1] == 0:
         return np.zeros(0), float(y @ y)
     s = np.linalg.norm(A, axis=0)
     s[s == 0] = 1.0
-    res = lsq_linear(A / s, y, bounds=(lower * s, np.full(lower.size, np.inf)), method="bvls")
-    x = res.x / s
+    x = np.linalg.lstsq(A / s, y, rcond=None)[0]
+    if not np.all(x >= lower * s):
+        bounds = (lower * s, np.full(lower.size, np.inf))
+        x = lsq_linear(A / s, y, bounds=bounds, method="bvls").x
+    x = x / s
     r = y - A @ x
     return x, float(r @ r)
 
