@@ -89,13 +89,14 @@ def _linear_steps(pred: BranchMatchedPredictor) -> np.ndarray:
 
 
 def _run_verifications(ex, jobs: list[VerifyJob], essential: int, enough, workers: int,
-                       follow=None) -> tuple[dict, dict]:  # fmt: skip
+                       follow=None, started=()) -> tuple[dict, dict]:  # fmt: skip
     """Run verification jobs (on ``ex``, at most ``workers`` at a time, or in this process)
     in order; the jobs after the first ``essential`` start one at a time once the jobs before
     them are in, and are dropped once ``enough`` of the results so far holds (so which run
     does not depend on which finished first). ``follow(i, result)`` may return a further job
     for a finished one (a fit that went most of the way goes on at once, ahead of the jobs
-    not yet started, instead of after all of them).
+    not yet started, instead of after all of them). ``started`` holds the futures of the
+    first jobs, already submitted to ``ex``.
 
     Returns ``{index: Verified}`` of the jobs run, in job order, and ``{index: Verified}`` of
     the further jobs."""
@@ -113,8 +114,8 @@ def _run_verifications(ex, jobs: list[VerifyJob], essential: int, enough, worker
             if (nxt := next_of(i)) is not None:
                 further[i] = run_verify(nxt)
         return out, further
-    running: dict = {}
-    queue = list(enumerate(jobs))
+    running: dict = {f: (i, False) for i, f in enumerate(started)}
+    queue = list(enumerate(jobs))[len(started) :]
     while queue or running:
         while queue and len(running) < workers:
             i, job = queue[0]
@@ -160,6 +161,20 @@ def _screen_from(model: Model, data, st: DiagnosisSettings, pred=None) -> Screen
     return Screen(model, data, predictor=pred)
 
 
+def _lead(fits: list[ScreenFit]) -> ScreenFit | None:
+    """The screen's best nonlinear candidate: the first :func:`_shortlist` picks."""
+    return next((f for f in fits if f.candidate.law.kind not in _LINEAR_KINDS), None)
+
+
+def _settled(refit: Verified, cmp, st: DiagnosisSettings) -> bool:
+    """The recalibrated model is at the noise (nothing to verify) or far below the calibrated
+    model (the screen runs again from it, and so does every verification)."""
+    rms = refit.rms_over_noise()
+    return rms <= st.adequate_rms or (
+        not refit.failed and rms <= st.rescreen_ratio * cmp.rms_over_noise
+    )
+
+
 def _best_rms(done: list[Verified]) -> float:
     return min((v.rms_over_noise() for v in done), default=math.inf)
 
@@ -193,7 +208,7 @@ def _shortlist(
     the best candidate of each law family the evidence points at a measured point.
     """
     nonlinear = [f for f in fits if f.candidate.law.kind not in _LINEAR_KINDS]
-    first: list[ScreenFit] = []
+    first: list[ScreenFit] = []  # nonlinear[0] first (:func:`_lead`)
     laws: list = []
     for f in nonlinear:
         if _law_key(f.candidate) not in laws:
@@ -397,6 +412,7 @@ def diagnose(
             text, source, path, None, cand, dict(values or {}), dict(known or {}),
             None if linear_run is None else str(linear_run), st.verify_iterations, n_starts,
             seed, start_toml, st.n_harmonics, st.n_time, st.verify_seconds,
+            reweight_drop=st.reweight_drop,
         )  # fmt: skip
 
     with open_executor(st.workers) as ex:
@@ -420,8 +436,16 @@ def diagnose(
         fits = screen.refine(fits, st.n_refine, progress)
         timings["screen_s"] = time.perf_counter() - t1
         say("screened", {"n": len(fits), "seconds": timings["screen_s"]})
-        # the short list (its refinements at unmeasured DOFs) while the workers finish the
-        # recalibration and the linear test
+        refit = refit_job.result()
+        # the screen's best law goes first in any case: its verification starts as soon as a
+        # worker is free, while this process makes the short list (its refinements at
+        # unmeasured DOFs) and the workers finish the linear test
+        lead = _lead(fits)
+        early = []
+        if ex is not None and lead is not None and not _settled(refit, cmp, st):
+            early = [ex.submit(run_verify, dataclasses.replace(
+                verify_job(lead.candidate, lead.values, lead.known),
+                give_up_chi2=refit.chi2_per_dof()))]  # fmt: skip
         t2 = time.perf_counter()
         first, second = _shortlist(screen, fits, evidence, st.n_verify, baseline.bic)
         timings["shortlist_s"] = time.perf_counter() - t2
@@ -434,7 +458,6 @@ def diagnose(
             lin_fits.sort(key=lambda f: f.bic)
             say("linear screen", {"n": len(lin_fits), "best": lin_fits[0].candidate.label
                                   if lin_fits else ""})  # fmt: skip
-        refit = refit_job.result()
         timings["refit_s"] = refit.seconds
         say("recalibrated", {"rms_over_noise": refit.rms_over_noise()})
         result = Diagnosis("adequate", cmp, evidence, fits, baseline, lin_fits, refit,
@@ -493,7 +516,8 @@ def diagnose(
             return go_on(jobs[i].candidate, v)
 
         # the jobs run are the first len(ran), in order: their indices are their positions
-        ran, further = _run_verifications(ex, jobs, essential, enough, st.workers, follow)
+        assert not early or origin[0] is lead
+        ran, further = _run_verifications(ex, jobs, essential, enough, st.workers, follow, early)
         origin = origin[: len(ran)]
         done = list(ran.values())
         for i, v in further.items():

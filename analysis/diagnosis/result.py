@@ -50,6 +50,10 @@ class DiagnosisSettings:
     verify_seconds : float
         Processor time allowed for one verification's Levenberg-Marquardt (its last iterate
         is scored; processor time, so other processes on the machine do not cut it short).
+    reweight_drop : float
+        A verification recomputes its weights (the force's error through the model) when it
+        stalls at a metric this many times below the one they were computed at, and goes on
+        from there (:func:`~analysis.diagnosis.refit.refit`).
     continue_seconds, continue_decrease : float
         When no candidate explains the misfit, the (at most two) verifications stopped for
         time while their last iteration still lowered the metric by ``continue_decrease`` or
@@ -84,6 +88,7 @@ class DiagnosisSettings:
     n_refine: int = 6
     verify_iterations: int = 8
     verify_seconds: float = 12.0
+    reweight_drop: float = 2.0
     continue_seconds: float = 30.0
     continue_decrease: float = 0.1
     n_starts: int = 4

@@ -81,6 +81,9 @@ class VerifyJob:
     reweight_passes : int
         Further fits with the weights recomputed at the last fit's values
         (:func:`~analysis.diagnosis.refit.refit`'s ``reweight_passes``).
+    reweight_drop : float or None
+        The weights recomputed during the fit when it stalls this many times below the metric
+        they were computed at (:func:`~analysis.diagnosis.refit.refit`'s ``reweight_drop``).
     """
 
     model_toml: str
@@ -100,6 +103,7 @@ class VerifyJob:
     max_seconds: float | None = None
     give_up_chi2: float | None = None
     reweight_passes: int = 0
+    reweight_drop: float | None = None
 
 
 @dataclass
@@ -305,7 +309,7 @@ def _verify(job: VerifyJob, t0: float) -> Verified:
             distributions=dists, n_random_starts=job.n_starts, seed=job.seed,
             max_iterations=job.max_iterations, ftol=1e-4, n_harmonics=job.n_harmonics,
             n_time=job.n_time, max_seconds=job.max_seconds, give_up_chi2=job.give_up_chi2,
-            reweight_passes=job.reweight_passes,
+            reweight_passes=job.reweight_passes, reweight_drop=job.reweight_drop,
         )  # fmt: skip
         fitted, history, params = r.model, r.history, r.parameters
         message = r.lm.message if r.lm is not None else ""
