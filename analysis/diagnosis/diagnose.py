@@ -166,13 +166,16 @@ def _lead(fits: list[ScreenFit]) -> ScreenFit | None:
     return next((f for f in fits if f.candidate.law.kind not in _LINEAR_KINDS), None)
 
 
+def _rescreen(refit: Verified, cmp, st: DiagnosisSettings) -> bool:
+    """The recalibrated model is far below the calibrated one: the calibration was a poor
+    start, and the screen runs again from the recalibrated model."""
+    return not refit.failed and refit.rms_over_noise() <= st.rescreen_ratio * cmp.rms_over_noise
+
+
 def _settled(refit: Verified, cmp, st: DiagnosisSettings) -> bool:
-    """The recalibrated model is at the noise (nothing to verify) or far below the calibrated
-    model (the screen runs again from it, and so does every verification)."""
-    rms = refit.rms_over_noise()
-    return rms <= st.adequate_rms or (
-        not refit.failed and rms <= st.rescreen_ratio * cmp.rms_over_noise
-    )
+    """The recalibrated model is at the noise (nothing to verify) or a rescreen case (every
+    verification starts from it)."""
+    return refit.rms_over_noise() <= st.adequate_rms or _rescreen(refit, cmp, st)
 
 
 def _best_rms(done: list[Verified]) -> float:
@@ -465,7 +468,7 @@ def diagnose(
         if refit.rms_over_noise() <= st.adequate_rms:
             timings["total_s"] = time.perf_counter() - t0
             return result
-        if not refit.failed and refit.rms_over_noise() <= st.rescreen_ratio * cmp.rms_over_noise:
+        if _rescreen(refit, cmp, st):
             # the calibration's values were a poor start (a missing effect can pull the
             # model's own parameters into a far minimum), and a screen reads the states
             # through the model's own elements: screen again from the recalibrated model,

@@ -201,15 +201,7 @@ class _Frame:
     known: list  # (element, pos_a, pos_b, {model p: element p})
     X0: np.ndarray  # (n, H+1, nD) start phasors (the anchor's)
     omega: np.ndarray
-    R_o: np.ndarray | None = field(default=None, repr=False)  # R at the measured orders
-
-
-def _at_orders(fr: _Frame, order_k: np.ndarray) -> np.ndarray:
-    """``fr.R`` at the measured orders, shape (n, K, nD, 1 + nD); taken once per frame (every
-    candidate of a screen fits on it)."""
-    if fr.R_o is None:
-        fr.R_o = fr.R[:, order_k]
-    return fr.R_o
+    R_o: np.ndarray  # (n, K, nD, 1 + nD): R at the measured orders (every candidate's fit)
 
 
 class Screen:
@@ -356,7 +348,7 @@ class Screen:
             (a.element, pos[a.dof_a], None if a.dof_b is None else pos[a.dof_b], dict(a.param_map))
             for a in attachments(model)
         ]
-        fr = _Frame(model, dofs, R, known, X0, omega)
+        fr = _Frame(model, dofs, R, known, X0, omega, R[:, self._basis.order_k])
         self._frames[joint] = fr
         return fr
 
@@ -751,7 +743,7 @@ class Screen:
         if "X_init" not in st:
             X = fr.X0.copy()
             X[:, bs.order_k] = st["U"]
-            other = np.setdiff1d(np.arange(bs.H + 1), bs.order_k)
+            other = bs.other
             fine = _Basis(bs.H, 1024, bs.order_k)
             for _ in range(INITIAL_PASSES):
                 g = np.zeros_like(X)
@@ -786,7 +778,7 @@ class Screen:
         known = {mp: el.params[ep] for el, _, _, pmap in fr.known for mp, ep in pmap.items()}
         W = st["W"]
         Wr = np.stack([W, W], axis=2).reshape(n, -1)  # (n, 2KC)
-        R_o = _at_orders(fr, bs.order_k)  # (n, K, nD, 1 + nD)
+        R_o = fr.R_o
         drive = R_o[:, :, :C, 0] * self._F[self.rows][:, :, None]
         other = bs.other
         # incidences where laws act: the model's elements, then the candidate's

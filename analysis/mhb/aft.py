@@ -30,6 +30,19 @@ _NONE = np.zeros((0, 0))  # a derivative not wanted (the kernels skip size-0 arr
 
 
 @njit(cache=True)
+def _series(k, Ue, t):
+    """``u``, ``du/dtau`` and ``d2u/dtau2`` of the coefficients ``Ue`` at the phase ``t``."""
+    u, d, dd = Ue[0], 0.0, 0.0
+    for h in range(k.size):
+        ch, sh = np.cos(k[h] * t), np.sin(k[h] * t)
+        a, b = Ue[2 * h + 1], Ue[2 * h + 2]
+        u += a * ch + b * sh
+        d += k[h] * (b * ch - a * sh)
+        dd -= k[h] * k[h] * (a * ch + b * sh)
+    return u, d, dd
+
+
+@njit(cache=True)
 def _locate_jumps(tau, k, Ue, u_t, u_s):
     """Threshold crossings between consecutive samples, refined on the Fourier series.
 
@@ -66,26 +79,18 @@ def _locate_jumps(tau, k, Ue, u_t, u_s):
         g0, g1 = u_t[m] - u_s, u_t[(m + 1) % N] - u_s
         lo = tau[m]
         tc = lo + dtau * g0 / (g0 - g1)
-        u, d = Ue[0], 0.0
-        for h in range(H):
-            ch, sh = np.cos(k[h] * tc), np.sin(k[h] * tc)
-            a, b = Ue[2 * h + 1], Ue[2 * h + 2]
-            u += a * ch + b * sh
-            d += k[h] * (b * ch - a * sh)
+        u, d, _ = _series(k, Ue, tc)
         if d != 0.0:
             tc -= (u - u_s) / d
         tc = min(max(tc, lo), lo + dtau)
-        rows[0, kept, 0] = 1.0
-        d, dd = 0.0, 0.0
-        for h in range(H):
-            ch, sh = np.cos(k[h] * tc), np.sin(k[h] * tc)
-            a, b = Ue[2 * h + 1], Ue[2 * h + 2]
-            rows[0, kept, 2 * h + 1], rows[0, kept, 2 * h + 2] = ch, sh
-            rows[1, kept, 2 * h + 1], rows[1, kept, 2 * h + 2] = -k[h] * sh, k[h] * ch
-            d += k[h] * (b * ch - a * sh)
-            dd -= k[h] * k[h] * (a * ch + b * sh)
+        _, d, dd = _series(k, Ue, tc)
         if d == 0.0:
             continue
+        rows[0, kept, 0] = 1.0
+        for h in range(H):
+            ch, sh = np.cos(k[h] * tc), np.sin(k[h] * tc)
+            rows[0, kept, 2 * h + 1], rows[0, kept, 2 * h + 2] = ch, sh
+            rows[1, kept, 2 * h + 1], rows[1, kept, 2 * h + 2] = -k[h] * sh, k[h] * ch
         idx[kept], t[kept], up[kept], upp[kept] = m, tc, d, dd
         kept += 1
     return idx[:kept], t[:kept], rows[:, :kept], up[:kept], upp[:kept]
