@@ -155,17 +155,21 @@ RUN_CODE = (
 )
 
 
+#: Command-line front ends and stages that run commands but make no data themselves.
+FRONT_ENDS = ("gui", "service", "cli.py", "cli_service.py", "workflow.py", "export_uff.py")
+
+
 @functools.cache
-def _code_version() -> str:
+def _code_version(skip: tuple[str, ...] = ("gui", "service")) -> str:
     """A digest of the code that makes the simulated runs (:data:`RUN_CODE`, without the
-    lab GUI and the acquisition service): a run cached by other code is made again, not
-    reused."""
+    parts named in ``skip``: folders or file names): a run cached by other code is made
+    again, not reused."""
     root = Path(__file__).resolve().parent.parent
     h = hashlib.sha256()
     for part in RUN_CODE:
         path = root / part
         for f in sorted(path.rglob("*.py")) if path.is_dir() else [path]:
-            if "gui" not in f.parts and "service" not in f.parts:
+            if not set(skip) & set(f.relative_to(root).parts):
                 h.update(f.relative_to(root).as_posix().encode())
                 h.update(f.read_bytes())
     return h.hexdigest()

@@ -8,6 +8,7 @@ export-uff  export a measurement file's FRFs to UFF 58 (``rig export-uff run.h5 
 plans       list the built-in plans
 backends    list the DAQ backends and check that each can be opened here
 workflow    the paper's whole workflow on a backend (simulated by default)
+reference   what a simulated rig knows of its structure (the truth) as truth.json
 gui         the lab GUI: acquisition window and model workbench (simulated rig by default)
 amplifier   talk to the serial power amplifier (status, enable, mute, gain, clear)
 service     the acquisition service that owns the rig (``rig service start|stop|status``)
@@ -24,7 +25,7 @@ import logging
 import sys
 
 from rig.backends import available_backends, open_backend
-from rig.backends.protocol import BackendError
+from rig.backends.protocol import BackendError, reference_values
 from rig.cli_run import EXIT_INTERRUPTED, EXIT_USAGE, add_run_commands
 from rig.cli_service import add_service_commands
 
@@ -43,6 +44,33 @@ def cmd_backends(args) -> dict:
         for name, r in report.items():
             print(f"{name:4s} {'available' if r['available'] else 'not available'}: {r['message']}")
     return report
+
+
+def cmd_reference(args) -> dict:
+    """Write what the backend knows of the structure under test (a simulated rig's truth)."""
+    from pathlib import Path
+
+    options = {"truth": args.truth, "seed": args.seed} if args.backend == "sim" else {}
+    backend = open_backend(args.backend, **options)
+    try:
+        ref = reference_values(backend)
+    finally:
+        backend.close()
+    if ref is None:
+        raise ValueError(
+            f"backend {args.backend!r} knows no reference values: only a simulated rig knows "
+            "the structure it simulates"
+        )
+    if args.out:
+        out = Path(args.out)
+        if out.exists() and not args.overwrite:
+            raise ValueError(f"{out} exists: pass --overwrite to replace it")
+        out.write_text(json.dumps(ref, indent=1) + "\n")
+    if not args.json:
+        print(f"{ref['source']}:")
+        for name, value in ref["parameters"].items():
+            print(f"  {name:12s} {value:.6g} {ref['units'].get(name, '')}")
+    return ref
 
 
 def cmd_amplifier(args) -> dict:
@@ -114,6 +142,21 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--lock-dir", help="directory of the device locks")
     sp.add_argument("--json", action="store_true", help="print one JSON object")
     sp.set_defaults(func=cmd_workflow)
+
+    sp = sub.add_parser(
+        "reference",
+        help="a simulated rig's truth (parameter values, modal damping) as JSON",
+        description="Ask the backend what it knows of the structure under test. A simulated "
+        "rig knows its truth; write it beside the results (truth.json) to judge a calibration "
+        "against it. Hardware knows nothing of the kind.",
+    )
+    sp.add_argument("--backend", choices=("sim", "ni"), default="sim")
+    sp.add_argument("--truth", default="reference", help="simulated rig: truth structure")
+    sp.add_argument("--seed", type=int, default=None, help="simulated rig: noise seed")
+    sp.add_argument("--out", help="write the JSON here (e.g. truth.json)")
+    sp.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    sp.add_argument("--json", action="store_true", help="print one JSON object")
+    sp.set_defaults(func=cmd_reference)
     add_gui_command(sub)
     return p
 

@@ -130,6 +130,25 @@ class SimulatedDaq:
         self._reset_run()
         self._state = _NEW
 
+    # -- what only a simulation knows ---------------------------------------------------------
+    def reference_values(self) -> dict:
+        """The truth's parameter values, units and modal damping, as a lab would quote a
+        reference structure's data sheet (:func:`rig.backends.protocol.reference_values`).
+
+        Only the simulated rig can answer: these are the values the analysis tries to find, so
+        they go to a separate file beside the results, never into a measurement file."""
+        model = self.truth.model
+        return {
+            "source": f"simulated rig, truth {self.truth.name!r}",
+            "truth": str(self.truth.name),
+            "hidden_effect": self.truth.hidden_effect,
+            "description": self.truth.description,
+            "parameters": model.values(),
+            "units": {n: p.unit for n, p in model.parameters.items()},
+            "modal_damping": {str(k): float(v) for k, v in model.damping.per_mode.items()},
+            "default_modal_damping": float(model.damping.default_zeta),
+        }
+
     # -- properties ---------------------------------------------------------------------------
     @property
     def sample_rate_hz(self) -> float:

@@ -25,6 +25,7 @@ __all__ = [
     "BackendError",
     "DaqBackend",
     "ReadTimeoutError",
+    "reference_values",
 ]
 
 QUANTITIES = ("force", "acceleration", "voltage")
@@ -212,3 +213,16 @@ class DaqBackend(Protocol):
     def close(self) -> None:
         """Stop (output at 0 V) and release the device (idempotent)."""
         ...
+
+
+def reference_values(backend: object) -> dict | None:
+    """What the backend knows of the structure under test, or None.
+
+    A simulated rig knows the "truth" it simulates (its parameter values, units and modal
+    damping: ``parameters``, ``units``, ``modal_damping``, ``source``) and says so through an
+    optional ``reference_values()`` method; hardware knows nothing of the kind and has none.
+    The answer is for judging an analysis (``truth.json`` beside the results), never for
+    feeding one: the measurement file does not carry it.
+    """
+    method = getattr(backend, "reference_values", None)
+    return method() if callable(method) else None
