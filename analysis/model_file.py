@@ -56,6 +56,12 @@ class Parameter:
 
     ``lower``/``upper`` bound calibration; ``value`` may leave them (a warning is the
     caller's business) but must be finite, and positive under ``log`` scaling.
+
+    ``prior_rel_std`` is what is known of the parameter before any test: a standard deviation
+    about ``nominal``, relative to it (0.05: 5 %; under ``log`` scaling the standard deviation
+    of ``ln p``). A calibration that cannot determine the parameter holds it at ``nominal``
+    with this uncertainty and carries it into everything it reports; ``None``: no prior is
+    known (the parameter must be determined by the test or reported as not determined).
     """
 
     name: str
@@ -68,6 +74,7 @@ class Parameter:
     unit: str = ""
     group: str = "linear"
     description: str = ""
+    prior_rel_std: float | None = None
 
     def __post_init__(self) -> None:
         if not NAME_RE.match(self.name) or self.name in RESERVED:
@@ -92,6 +99,13 @@ class Parameter:
             raise ValueError(f"group: must be 'linear' or 'nonlinear', got {self.group!r}")
         if not isinstance(self.calibrate, bool):
             raise ValueError(f"calibrate: must be true or false, got {self.calibrate!r}")
+        prior = self.prior_rel_std
+        if prior is not None:
+            if isinstance(prior, bool) or not isinstance(prior, int | float):
+                raise ValueError(f"prior_rel_std: must be a number, got {prior!r}")
+            if not (math.isfinite(prior) and prior > 0):
+                raise ValueError(f"prior_rel_std: must be finite and > 0, got {prior!r}")
+            object.__setattr__(self, "prior_rel_std", float(prior))
 
 
 @dataclass(frozen=True)
@@ -338,7 +352,7 @@ def _frame(r: _Reader, doc: dict) -> FrameSpec:
 def _parameter(r: _Reader, name: str, t: dict, group: str | None) -> Parameter:
     p = f"parameters.{name}"
     keys = {"value", "nominal", "lower", "upper", "calibrate", "scaling", "unit", "group"}
-    r.table(t, p, keys | {"description"})
+    r.table(t, p, keys | {"description", "prior_rel_std"})
     if "value" not in t and "nominal" not in t:
         r.fail(p, "give a value or a nominal value")
     value = r.number(t.get("value", t.get("nominal")), f"{p}.value")
@@ -349,6 +363,8 @@ def _parameter(r: _Reader, name: str, t: dict, group: str | None) -> Parameter:
     for k in ("scaling", "unit", "group", "description"):
         if k in t:
             kw[k] = r.text(t[k], f"{p}.{k}")
+    if "prior_rel_std" in t:
+        kw["prior_rel_std"] = r.number(t["prior_rel_std"], f"{p}.prior_rel_std")
     kw.setdefault("group", group or "linear")
     if kw.get("scaling") == "log":
         kw.setdefault("lower", 0.0)
@@ -567,6 +583,7 @@ def _parameter_doc(p: Parameter) -> dict:
     t: dict[str, Any] = {"value": p.value, "nominal": p.nominal}
     t |= {k: getattr(p, k) for k in ("lower", "upper") if math.isfinite(getattr(p, k))}
     t |= {"calibrate": p.calibrate, "scaling": p.scaling, "unit": p.unit, "group": p.group}
+    t |= {"prior_rel_std": p.prior_rel_std} if p.prior_rel_std is not None else {}
     return t | ({"description": p.description} if p.description else {})
 
 
