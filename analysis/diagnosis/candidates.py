@@ -301,8 +301,9 @@ def _add_mass(model: Model, location: Location, param: Parameter) -> Model:
         )
         d = dataclasses.asdict(param)
         d.pop("name")
-        doc["parameters"][param.name] = {k: v for k, v in d.items() if not (
-            isinstance(v, float) and math.isinf(v))}  # fmt: skip
+        doc["parameters"][param.name] = {
+            k: v for k, v in d.items() if v is not None and not (isinstance(v, float) and math.isinf(v))
+        }
 
     return _edit(model, edit)
 
