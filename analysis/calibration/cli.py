@@ -1,7 +1,8 @@
 """Command-line commands of the nonlinear calibration: calibrate, crossval, validate, report.
 
 Each command reads files and writes files into an output folder, so they chain:
-``calibrate RUN.h5 --out R``; ``crossval --result R/calibration.json``;
+``calibrate RUN.h5 --model M --out R`` (the calibration, its cross-validation and its stated
+uncertainty); ``crossval --result R/calibration.json`` (again, e.g. on another file);
 ``validate --result R/calibration.json``; ``report R``.
 """
 
@@ -20,6 +21,14 @@ from analysis.calibration.nonlinear import (
     make_predictor,
 )
 from analysis.calibration.results import load_calibration, save_calibration
+from analysis.calibration.uncertainty import (
+    ADEQUATE_RMS,
+    HeldParameters,
+    damping_modes_in_band,
+    held_from_linear_result,
+    held_from_priors,
+    load_linear_result,
+)
 from analysis.calibration.validation import validate
 from analysis.executors import make_executor
 from analysis.measurement_file import SteppedSineData, read_measurement
@@ -77,6 +86,61 @@ def _fit_figure(model, data, params, st, out: Path, levels, name: str, title: st
     )
 
 
+#: The linear calibration's result beside its model file (``analysis calibrate-linear``).
+LINEAR_RESULT = "linear_calibration.json"
+
+
+def _held(args, model, data: SteppedSineData) -> HeldParameters | None:
+    """The held values' uncertainty: the linear calibration's result (``--linear-result``,
+    or the one beside the model file), else the model file's priors."""
+    path = args.linear_result
+    if path is None and args.model and not args.set:
+        beside = Path(args.model).parent / LINEAR_RESULT
+        path = str(beside) if beside.exists() else None
+    orders = [float(o) for o in data.orders]
+    band = (float(data.frequency_hz.min()), float(data.frequency_hz.max()))
+    modes = damping_modes_in_band(model, band, max(orders))
+    if path:
+        return held_from_linear_result(load_linear_result(path), model, modes, source=path)
+    return held_from_priors(model)
+
+
+def _write_crossval(cv, out: Path) -> Path:
+    from analysis.report import plot_crossval
+
+    (out / "crossval.json").write_text(json.dumps(cv.to_json(), indent=1))
+    return plot_crossval(
+        cv.names, cv.folds, cv.estimates, cv.mean, cv.std, cv.fim_std, out / "crossval.png"
+    )
+
+
+def _print_result(res, model) -> None:
+    print("calibrated parameters (1 sigma: noise, misfit and held values together):")
+    for n, v in res.parameters.items():
+        unit = model.parameters[n].unit
+        print(f"  {n:10s} {v:12.5g} +- {res.std[n]:.3g} {unit}  "
+              f"(noise alone {res.std_noise[n]:.3g})")  # fmt: skip
+    for n, parts in res.contributions().items():
+        top = sorted(parts.items(), key=lambda kv: -kv[1])[:3]
+        print(f"    {n}: largest sources " + ", ".join(f"{k} {v:.3g}" for k, v in top))
+    if res.held is None:
+        print("  the held values (linear parameters, modal damping) are taken as exact")
+    else:
+        print(f"  held values' uncertainty from {res.held.source}")
+        for note in res.held.notes:
+            print(f"    note: {note}")
+    for why in res.misfit:
+        print(f"  MISFIT: {why}: the intervals are not to be trusted; `analysis diagnose` looks "
+              "for the missing effect")  # fmt: skip
+
+
+def _crossval_into(res, model, data, executor, out: Path):
+    """Cross-validate ``res``, widen its intervals by the folds' evidence, write the files."""
+    cv = cross_validate(model, data, res, executor=executor)
+    res.widen_with_folds(cv.std_ratio, [cv.folds[j] for j in cv.misfit_folds()])
+    return cv, _write_crossval(cv, out)
+
+
 def cmd_calibrate(args) -> dict:
     from analysis.report import plot_convergence
 
@@ -84,6 +148,7 @@ def cmd_calibrate(args) -> dict:
     if args.set:
         model = model.with_values({k: float(v) for k, v in (s.split("=", 1) for s in args.set)})
     data = _stepped(args.run)
+    held = _held(args, model, data)
     st = CalibrationSettings(
         n_starts=args.starts,
         seed=args.seed,
@@ -93,9 +158,17 @@ def cmd_calibrate(args) -> dict:
         include_unconverged=args.include_unconverged,
     )
     out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
+    cv = None
     with make_executor(args.workers, args.scheduler) as ex:
-        res = calibrate_nonlinear(model, data, st, executor=ex, progress=_progress(args.json))
+        res = calibrate_nonlinear(
+            model, data, st, executor=ex, progress=_progress(args.json), held=held
+        )
+        if not args.no_crossval:
+            t1 = time.perf_counter()
+            cv, cv_fig = _crossval_into(res, model, data, ex, out)
+            res.timings["crossval_s"] = time.perf_counter() - t1
     files = save_calibration(res, model, out, args.run)
     fig1 = plot_convergence([h["cost"] for h in res.lm.history], out / "convergence.png")
     fig2 = _fit_figure(
@@ -111,47 +184,58 @@ def cmd_calibrate(args) -> dict:
     summary = {
         "parameters": res.parameters,
         "std": res.std,
+        "std_noise": res.std_noise,
+        "interval_95": {
+            n: [v - 1.96 * res.std[n], v + 1.96 * res.std[n]] for n, v in res.parameters.items()
+        },  # fmt: skip
         "chi2_per_dof": res.chi2_per_dof,
+        "misfit": res.misfit,
+        "held": None if held is None else held.source,
         "lm_iterations": res.lm.nit,
         "timings": res.timings,
         "total_s": time.perf_counter() - t0,
         "files": [str(p) for p in (*files.values(), fig1, fig2)],
     }
+    if cv is not None:
+        summary["crossval"] = cv.to_json()
+        summary["files"].append(str(cv_fig))
     if not args.json:
-        print("calibrated parameters (1 sigma):")
-        for n, v in res.parameters.items():
-            print(f"  {n:10s} {v:12.5g} +- {res.std[n]:.3g}")
+        _print_result(res, model)
         print(f"chi2/dof {res.chi2_per_dof:.3f}; LM {res.lm.nit} iterations ({res.lm.message})")
+        if cv is not None:
+            _print_crossval(cv)
         print(f"model: {files['model']}\nresult: {files['result']}")
     return summary
 
 
-def cmd_crossval(args) -> dict:
-    from analysis.report import plot_crossval
+def _print_crossval(cv) -> None:
+    print(f"{len(cv.folds)}-fold cross-validation ({cv.seconds:.1f} s):")
+    for j, n in enumerate(cv.names):
+        print(
+            f"  {n:10s} mean {cv.mean[j]:12.5g}  std {cv.std[j]:.3g}  "
+            f"FIM^-1 std {cv.fim_std[j]:.3g}  ratio {cv.std_ratio[j]:.2f}"
+        )
+    if cv.stuck:
+        print(
+            f"  warning: {len(cv.stuck)} fold(s) could not leave the calibrated optimum "
+            f"({', '.join(cv.stuck)}): the standard deviations understate the uncertainty"
+        )
+    for line in cv.notes():
+        print(f"  note: {line}")
 
+
+def cmd_crossval(args) -> dict:
     res, model, data_path = load_calibration(args.result)
     data = _stepped(args.run or data_path)
-    with make_executor(args.workers, args.scheduler) as ex:
-        cv = cross_validate(model, data, res, executor=ex)
     out = Path(args.result).parent
-    (out / "crossval.json").write_text(json.dumps(cv.to_json(), indent=1))
-    fig = plot_crossval(
-        cv.names, cv.folds, cv.estimates, cv.mean, cv.std, cv.fim_std, out / "crossval.png"
-    )
+    with make_executor(args.workers, args.scheduler) as ex:
+        cv, fig = _crossval_into(res, model, data, ex, out)
+    if not args.run:  # the calibration's own data: its stated intervals take the evidence
+        save_calibration(res, model, out, data_path)
     if not args.json:
-        print(f"{len(cv.folds)}-fold cross-validation ({cv.seconds:.1f} s):")
-        for j, n in enumerate(cv.names):
-            print(
-                f"  {n:10s} mean {cv.mean[j]:12.5g}  std {cv.std[j]:.3g}  "
-                f"FIM^-1 std {cv.fim_std[j]:.3g}  ratio {cv.std_ratio[j]:.2f}"
-            )
-        if cv.stuck:
-            print(
-                f"  warning: {len(cv.stuck)} fold(s) could not leave the calibrated optimum "
-                f"({', '.join(cv.stuck)}): the standard deviations understate the uncertainty"
-            )
-        for line in cv.notes():
-            print(f"  note: {line}")
+        _print_crossval(cv)
+        if not args.run:
+            print(f"{args.result}: intervals now include the folds' scatter")
     return {**cv.to_json(), "figure": str(fig)}
 
 
@@ -218,6 +302,18 @@ def add_parsers(sub) -> None:
     sp.add_argument(
         "--identity", action="store_true", help="W = I (the paper) instead of 1/sigma^2"
     )
+    sp.add_argument(
+        "--linear-result",
+        metavar="FILE",
+        help="the linear calibration's linear_calibration.json, whose parameters' and modal "
+        "damping's uncertainty the stated intervals carry (default: the one beside --model, "
+        "else the model file's priors)",
+    )
+    sp.add_argument(
+        "--no-crossval",
+        action="store_true",
+        help="skip the cross-validation (its folds' scatter then does not widen the intervals)",
+    )
     sp.set_defaults(func=cmd_calibrate)
 
     sp = sub.add_parser("crossval", help="k-fold cross-validation of a calibration")
@@ -229,7 +325,13 @@ def add_parsers(sub) -> None:
     sp.add_argument("--result", required=True, help="calibration.json")
     sp.add_argument("--run", help="measurement file (default: the one calibrated)")
     sp.add_argument("--level", type=float, help="level [N] (default: the one held out)")
-    sp.add_argument("--threshold", type=float, default=2.0, help="largest chi2/dof that passes")
+    sp.add_argument(
+        "--threshold",
+        type=float,
+        default=ADEQUATE_RMS**2,
+        help=f"largest chi2/dof that passes (default {ADEQUATE_RMS**2:g}: the RMS residual "
+        f"within {ADEQUATE_RMS:g} x the noise, as every analysis judges a model)",
+    )
     sp.set_defaults(func=cmd_validate)
 
     sp = sub.add_parser("report", help="collect a folder's results into one report")

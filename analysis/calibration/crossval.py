@@ -35,6 +35,7 @@ from analysis.calibration.nonlinear import (
     make_predictor,
 )
 from analysis.calibration.objective import FRFObjective
+from analysis.calibration.uncertainty import adequate
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 
@@ -57,7 +58,8 @@ class CrossValidation:
     cov : ndarray, shape (n, n)
         Jackknife-scaled covariance.
     fim_std : ndarray, shape (n,)
-        Standard deviations from the inverse Fisher information of the full calibration.
+        Standard deviations from the inverse Fisher information of the full calibration (the
+        noise-only ones, ``cov_noise``).
     iterations : list of int
         Accepted Gauss-Newton steps of each fold.
     stuck : list of str
@@ -97,11 +99,17 @@ class CrossValidation:
         return self.std / self.fim_std
 
     def misfit_folds(self, alpha: float = 1e-3) -> list[int]:
-        """Folds the calibrated model does not fit (noise-only probability below ``alpha``),
-        worst first."""
+        """Folds the calibrated model does not fit, worst first: beyond
+        :data:`~analysis.calibration.uncertainty.ADEQUATE_RMS` of the noise (the threshold
+        every analysis uses) and improbable from the noise alone (probability below
+        ``alpha``)."""
         if self.fold_p is None:
             return []
-        bad = [j for j, p in enumerate(self.fold_p) if np.isfinite(p) and p < alpha]
+        bad = [
+            j
+            for j, p in enumerate(self.fold_p)
+            if np.isfinite(p) and p < alpha and not adequate(np.sqrt(self.fold_chi2[j]))
+        ]
         return sorted(bad, key=lambda j: -self.fold_chi2[j])
 
     def notes(self, low: float = 0.5, high: float = 2.0, alpha: float = 1e-3) -> list[str]:
@@ -249,7 +257,7 @@ def cross_validate(
         estimates=est,
         mean=mean,
         cov=cov,
-        fim_std=np.sqrt(np.diag(calibration.cov)),
+        fim_std=np.sqrt(np.diag(calibration.cov_noise)),
         iterations=[it for _, it in out],
         seconds=time.perf_counter() - t0,
         stuck=stuck,

@@ -18,6 +18,14 @@ from analysis.calibration.lhs import Distribution, latin_hypercube, paper_distri
 from analysis.calibration.lm import LeastSquaresResult, least_squares_lm
 from analysis.calibration.objective import FRFObjective
 from analysis.calibration.parameters import ParameterSpace
+from analysis.calibration.uncertainty import (
+    ADEQUATE_RMS,
+    HeldParameters,
+    Propagation,
+    adequate,
+    noise_scale,
+    propagate_held,
+)
 from analysis.measurement_file import SteppedSineData, read_measurement
 from analysis.model import Model
 from analysis.predict import SteppedSinePredictor
@@ -158,8 +166,12 @@ class NonlinearCalibration:
     parameters : dict name -> float
         Calibrated values (physical units).
     cov : ndarray, shape (n, n)
-        Parameter covariance (physical units): ``(J^T W J)^-1`` for uncertainty weighting,
-        scaled by the residual variance for identity weighting.
+        The reported covariance (physical units): the noise's ``cov_noise`` scaled per
+        parameter by ``noise_scale``, plus ``held_cov``, what the held values' uncertainty
+        does to the fitted ones (:mod:`analysis.calibration.uncertainty`).
+    cov_noise : ndarray, shape (n, n)
+        The noise-only covariance, the inverse Fisher information: ``(J^T W J)^-1`` for
+        uncertainty weighting, scaled by the residual variance for identity weighting.
     std, correlation
         From ``cov``.
     chi2_per_dof : float
@@ -168,6 +180,14 @@ class NonlinearCalibration:
         Latin hypercube candidates; ``start_costs`` their metric.
     lm : LeastSquaresResult
         The refinement (scaled coordinates) with its history.
+    held : HeldParameters or None
+        The values held fixed and their uncertainty (None: held as exact).
+    held_cov : ndarray, shape (n, n)
+    held_gain : ndarray, shape (n, k)
+        ``d parameter / d held value`` at the optimum.
+    noise_scale : ndarray, shape (n,)
+        Factor on each noise-only standard deviation: the Birge ratio, or the folds' scatter
+        over the noise-only figure once a cross-validation widened it (``fold_ratio``).
     """
 
     parameters: dict[str, float]
@@ -182,15 +202,85 @@ class NonlinearCalibration:
     calibration_levels_n: tuple[float, ...]
     validation_level_n: float | None
     timings: dict[str, float] = field(default_factory=dict)
+    cov_noise: np.ndarray | None = None
+    held: HeldParameters | None = None
+    held_cov: np.ndarray | None = None
+    held_gain: np.ndarray | None = None
+    noise_scale: np.ndarray | None = None
+    fold_ratio: np.ndarray | None = None
+    fold_misfit: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        n = self.space.size
+        if self.cov_noise is None:
+            self.cov_noise = np.array(self.cov, dtype=float)
+        if self.held_cov is None:
+            self.held_cov = np.zeros((n, n))
+        if self.noise_scale is None:
+            self.noise_scale = np.ones(n)
 
     @property
     def std(self) -> dict[str, float]:
         return dict(zip(self.space.names, np.sqrt(np.diag(self.cov)).tolist(), strict=True))
 
     @property
+    def std_noise(self) -> dict[str, float]:
+        return dict(zip(self.space.names, np.sqrt(np.diag(self.cov_noise)).tolist(), strict=True))
+
+    @property
     def correlation(self) -> np.ndarray:
         s = np.sqrt(np.diag(self.cov))
         return self.cov / np.outer(s, s)
+
+    @property
+    def rms_over_noise(self) -> float:
+        """Root of the chi-square per degree of freedom of the fit."""
+        return float(np.sqrt(self.chi2_per_dof))
+
+    @property
+    def misfit(self) -> list[str]:
+        """Why the model misfits its calibration data beyond :data:`ADEQUATE_RMS` of the
+        noise (the intervals are then not to be trusted); empty when it is adequate."""
+        out = []
+        if self.settings.weighting == "uncertainty" and not adequate(self.rms_over_noise):
+            out.append(
+                f"the calibrated model misfits its calibration data by {self.rms_over_noise:.3g}"
+                f" x the noise (adequate up to {ADEQUATE_RMS:g})"
+            )
+        return out + list(self.fold_misfit)
+
+    def combine(self) -> None:
+        """Set ``cov`` from its parts (after ``noise_scale`` or ``held_cov`` changed)."""
+        k = np.asarray(self.noise_scale, dtype=float)
+        self.cov = self.cov_noise * np.outer(k, k) + self.held_cov
+
+    def widen_with_folds(self, std_ratio, misfit_folds: list[str]) -> None:
+        """Take a cross-validation's evidence into the stated intervals: each parameter's
+        noise part widened by the folds' scatter where it exceeds the Birge ratio, and the
+        folds the model misfits named among :attr:`misfit`."""
+        self.fold_ratio = np.asarray(std_ratio, dtype=float)
+        self.noise_scale = noise_scale(self.chi2_per_dof, self.fold_ratio)
+        self.fold_misfit = [
+            f"the cross-validation finds a systematic misfit in {', '.join(misfit_folds[:3])}"
+        ] if misfit_folds else []  # fmt: skip
+        self.combine()
+
+    def contributions(self) -> dict[str, dict[str, float]]:
+        """Per parameter, the standard deviation each source contributes (they add in
+        quadrature to ``std``): ``noise``, ``misfit`` (what the noise scale adds to it) and
+        one entry per held value."""
+        names = self.space.names
+        sd_noise = np.sqrt(np.diag(self.cov_noise))
+        k = np.asarray(self.noise_scale, dtype=float) * np.ones(len(names))
+        out: dict[str, dict[str, float]] = {}
+        for i, n in enumerate(names):
+            row = {"noise": float(sd_noise[i]),
+                   "misfit": float(sd_noise[i] * np.sqrt(max(k[i] ** 2 - 1, 0.0)))}  # fmt: skip
+            if self.held is not None and self.held_gain is not None:
+                for j, h in enumerate(self.held.names):
+                    row[h] = float(abs(self.held_gain[i, j]) * np.sqrt(self.held.cov[j, j]))
+            out[n] = row
+        return out
 
     def calibrated_model(self, model: Model) -> Model:
         """``model`` with the calibrated values."""
@@ -198,11 +288,32 @@ class NonlinearCalibration:
 
     def to_json(self) -> dict:
         names = list(self.space.names)
+        std = self.std
         return {
             "parameters": self.parameters,
-            "std": self.std,
+            "std": std,
+            "interval_95": {
+                n: [self.parameters[n] - 1.96 * std[n], self.parameters[n] + 1.96 * std[n]]
+                for n in names
+            },  # fmt: skip
             "cov": self.cov.tolist(),
             "correlation": self.correlation.tolist(),
+            "std_noise": self.std_noise,
+            "cov_noise": self.cov_noise.tolist(),
+            "uncertainty": {
+                "estimator": UNCERTAINTY_ESTIMATOR,
+                "noise_scale": np.asarray(self.noise_scale, float).tolist(),
+                "fold_ratio": None if self.fold_ratio is None else self.fold_ratio.tolist(),
+                "held": None if self.held is None else self.held.to_json(),
+                "held_cov": np.asarray(self.held_cov).tolist(),
+                "held_gain": None if self.held_gain is None else self.held_gain.tolist(),
+                "contributions": self.contributions(),
+                "notes": [] if self.held is None else list(self.held.notes),
+            },
+            "rms_over_noise": self.rms_over_noise,
+            "adequate_rms": ADEQUATE_RMS,
+            "misfit": self.misfit,
+            "fold_misfit": self.fold_misfit,
             "names": names,
             "chi2_per_dof": self.chi2_per_dof,
             "n_residuals": self.n_residuals,
@@ -236,6 +347,14 @@ class NonlinearCalibration:
             "settings": self.settings.to_json(),
             "timings": self.timings,
         }
+
+
+UNCERTAINTY_ESTIMATOR = (
+    "noise: inverse Fisher information (J^T W J)^-1 of the uncertainty-weighted metric, each "
+    "standard deviation scaled by the larger of the Birge ratio sqrt(chi2/dof) and the "
+    "cross-validation folds' scatter over it; plus G C_b G^T, the held linear parameters' "
+    "and modal damping ratios' covariance C_b carried through the sensitivities G"
+)
 
 
 # -- objective construction, also inside worker processes -------------------------------
@@ -310,6 +429,7 @@ def calibrate_nonlinear(
     *,
     executor: cf.Executor | None = None,
     progress: Callable[[str, dict], None] | None = None,
+    held: HeldParameters | None = None,
 ) -> NonlinearCalibration:
     """Calibrate nonlinear parameters on multi-harmonic FRFs (paper sec. 2.3).
 
@@ -324,6 +444,9 @@ def calibrate_nonlinear(
         Runs the Latin hypercube evaluations (a process pool, or a Dask client's executor).
     progress : callable, optional
         ``progress(stage, info)`` for command lines and GUIs.
+    held : HeldParameters, optional
+        The uncertainty of the values the calibration holds (the linear parameters, the
+        modal damping): carried into the reported covariance. None: they are held as exact.
     """
     st = settings or CalibrationSettings()
     cal_levels, val_level = split_levels(data, st)
@@ -381,7 +504,7 @@ def calibrate_nonlinear(
         cov = cov * chi2
     p = space.to_physical(best.x)
     log.info("calibrated %s (chi2/dof %.3g)", space.as_dict(p), chi2)
-    return NonlinearCalibration(
+    result = NonlinearCalibration(
         parameters=space.as_dict(p),
         cov=cov,
         chi2_per_dof=float(chi2),
@@ -394,4 +517,17 @@ def calibrate_nonlinear(
         calibration_levels_n=cal_levels,
         validation_level_n=val_level,
         timings={"lhs_s": lhs_s, "lm_s": lm_s},
+        cov_noise=cov,
+        held=held,
     )
+    if objective.weighting == "uncertainty":
+        result.noise_scale = noise_scale(chi2) * np.ones(n)
+    if held is not None and held.names:
+        t0 = time.perf_counter()
+        prop: Propagation = propagate_held(
+            objective, best.x, best.jac, model.with_values(result.parameters), held
+        )
+        result.held_cov, result.held_gain = prop.cov, prop.gain
+        result.timings["held_s"] = time.perf_counter() - t0
+    result.combine()
+    return result

@@ -16,6 +16,7 @@ from analysis.calibration.lhs import Distribution
 from analysis.calibration.lm import LeastSquaresResult
 from analysis.calibration.nonlinear import CalibrationSettings, NonlinearCalibration
 from analysis.calibration.parameters import ParameterSpace
+from analysis.calibration.uncertainty import HeldParameters
 from analysis.model import Model
 
 __all__ = ["load_calibration", "save_calibration"]
@@ -85,4 +86,15 @@ def load_calibration(path: str | Path) -> tuple[NonlinearCalibration, Model, str
         validation_level_n=doc["validation_level_n"],
         timings=doc.get("timings", {}),
     )
+    unc = doc.get("uncertainty")
+    if unc is not None:  # results written before the uncertainty record hold cov alone
+        res.cov_noise = np.array(doc["cov_noise"], dtype=float)
+        res.held = None if unc.get("held") is None else HeldParameters.from_json(unc["held"])
+        res.held_cov = np.array(unc["held_cov"], dtype=float)
+        res.held_gain = None if unc.get("held_gain") is None else np.array(unc["held_gain"])
+        res.noise_scale = np.array(unc["noise_scale"], dtype=float)
+        ratio = unc.get("fold_ratio")
+        res.fold_ratio = None if ratio is None else np.array(ratio, dtype=float)
+        res.fold_misfit = list(doc.get("fold_misfit", []))
+        res.combine()
     return res, model, doc.get("measurement_file", "")

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from analysis.calibration.nonlinear import NonlinearCalibration, fitted_rows, make_predictor
+from analysis.calibration.uncertainty import ADEQUATE_RMS
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 
@@ -75,7 +76,7 @@ def validate(
     calibration: NonlinearCalibration,
     *,
     level_n: float | None = None,
-    threshold: float = 2.0,
+    threshold: float = ADEQUATE_RMS**2,
 ) -> Validation:
     """Predict the held-out level with uncertainty bands and judge it.
 
@@ -86,7 +87,8 @@ def validate(
     level_n : float, optional
         Level to validate (default: the calibration's validation level).
     threshold : float
-        Largest chi-square per degree of freedom that passes.
+        Largest chi-square per degree of freedom that passes (default: the square of
+        :data:`~analysis.calibration.uncertainty.ADEQUATE_RMS`, as every analysis judges).
     """
     lv = calibration.validation_level_n if level_n is None else level_n
     if lv is None:

@@ -301,9 +301,8 @@ def _add_mass(model: Model, location: Location, param: Parameter) -> Model:
         )
         d = dataclasses.asdict(param)
         d.pop("name")
-        doc["parameters"][param.name] = {
-            k: v for k, v in d.items() if v is not None and not (isinstance(v, float) and math.isinf(v))
-        }
+        unset = (None, math.inf, -math.inf)
+        doc["parameters"][param.name] = {k: v for k, v in d.items() if v not in unset}
 
     return _edit(model, edit)
 

@@ -111,8 +111,9 @@ def run_linear_job(job: LinearJob) -> LinearFit:
             model, new = cand.apply(model, start)
         names = tuple(model.parameter_names(group="linear", calibrate=True))
         run = read_measurement(job.run_path)
+        # every candidate fits the same parameters, or their costs do not compare
         res = calibrate_linear(model, run, parameters=names, min_modes=min(4, len(names)),
-                               zeta0_schedule=())  # fmt: skip
+                               zeta0_schedule=(), weak_parameters="fit")  # fmt: skip
         n, k = int(res.jac.shape[0]), len(names)
         return LinearFit(
             cand, float(res.cost), n, k, _bic(float(res.cost), n, k),

@@ -223,7 +223,10 @@ def _linear_recalibration(model: Model, run: str, names: list[str]):
     from analysis.calibration.linear import calibrate_linear
 
     linear = [n for n in model.parameter_names(group="linear", calibrate=True)]
-    res = calibrate_linear(model, run, parameters=tuple(linear), min_modes=min(4, len(linear)))
+    # the costs of candidates compare only when each fits the same parameters
+    res = calibrate_linear(
+        model, run, parameters=tuple(linear), min_modes=min(4, len(linear)), weak_parameters="fit"
+    )
     info = {"parameters": res.parameters, "cost": res.cost, "n_residuals": int(res.jac.shape[0])}
     del names
     return res.model, info

@@ -106,6 +106,13 @@ class LinearCalibrationSettings:
     keep_sensor_masses : bool
         Keep the run's sensor masses in the calibrated model file (default: the file describes
         the structure; each run adds its own sensors).
+    weak_parameters : {"hold", "fit"}
+        ``"hold"``: a parameter the test does not determine better than its prior (the model
+        file's ``prior_rel_std``), or that runs to a bound, is held at its nominal value with
+        its prior uncertainty, and the others are fitted again with it held
+        (:func:`decide_weak`); its uncertainty is carried into theirs. ``"fit"``: every
+        parameter is fitted whatever the test says of it (for comparing candidate models on
+        the same parameters).
     """
 
     parameters: tuple[str, ...] | None = None
@@ -123,6 +130,7 @@ class LinearCalibrationSettings:
     f_max_factor: float = 10.0
     mac_min: float = 0.5
     keep_sensor_masses: bool = False
+    weak_parameters: str = "hold"
 
     def __post_init__(self) -> None:
         cp = self.calibration_points
@@ -151,6 +159,8 @@ class LinearCalibrationSettings:
             raise ValueError("n_per_band >= 2, max_iterations >= 1 and f_max_factor >= 1")
         if not 0 <= self.min_coherence < 1 or not 0 <= self.mac_min <= 1:
             raise ValueError("min_coherence in [0, 1) and mac_min in [0, 1]")
+        if self.weak_parameters not in ("hold", "fit"):
+            raise ValueError(f"weak_parameters: 'hold' or 'fit', got {self.weak_parameters!r}")
 
     def to_json(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
@@ -252,26 +262,73 @@ def calibrate_linear(
     lo, hi = space.theta_bounds()
     x0 = np.clip(space.to_theta(p0), lo, hi)
 
-    def objective(channels: list[int], eq) -> EqualizedFRFObjective:
-        return EqualizedFRFObjective(model_s, space, [rows[i] for i in channels], col,
+    def objective(
+        channels: list[int], eq, base: Model = model_s, sub: ParameterSpace = space
+    ) -> EqualizedFRFObjective:
+        return EqualizedFRFObjective(base, sub, [rows[i] for i in channels], col,
                                      eq.frequency_hz, eq.H[:, channels], eq.zeta0, f_max,
                                      st.use_phase)  # fmt: skip
 
     every = objective(list(range(len(rows))), eq)
     cal, val = split_channels(run_frfs, st.calibration_points, every, x0, st.n_calibration)
-    sol, stages = _continuation(
-        lambda z: objective(cal, eq if z == zeta0 else equalize(fit, z, st.n_per_band)),
-        [z for z in st.zeta0_schedule if z > zeta0] + [zeta0],
-        x0,
-        (lo, hi),
-        st,
-    )
+    zetas = [z for z in st.zeta0_schedule if z > zeta0] + [zeta0]
+    clusters = _mode_clusters(fit.n_modes, st.n_per_band, len(cal), st.use_phase)
+    nominal = {n: model.parameters[n].nominal for n in names}
+    held: dict[str, dict[str, Any]] = {}
+    while True:
+        fitted = [n for n in names if n not in held]
+        sub = ParameterSpace.from_model(model_s, fitted)
+        base = model_s.with_values({n: nominal[n] for n in held})
+        lo_f, hi_f = sub.theta_bounds()
+        sol, stages = _continuation(
+            lambda z, base=base, sub=sub: objective(
+                cal, eq if z == zeta0 else equalize(fit, z, st.n_per_band), base, sub
+            ),
+            zetas,
+            np.clip(sub.to_theta([model.parameters[n].value for n in fitted]), lo_f, hi_f),
+            (lo_f, hi_f),
+            st,
+        )
+        cov_d, estimator = data_covariance(sol.jac, sol.fun, clusters)
+        new = {} if st.weak_parameters == "fit" else decide_weak(model, sub, sol.x, cov_d)
+        if not new:
+            break
+        held.update(new)
+        if len(held) == len(names):
+            raise CalibrationError(
+                f"{run_frfs.source}: the test determines none of {names}: "
+                + "; ".join(f"{n}: {h['reason']}" for n, h in held.items())
+            )
+    precision = _prior_precision(model, fitted) if st.weak_parameters == "hold" else None
+    if precision is not None and precision.any():
+        # the fitted ones under their priors (MAP): the data's weight is the one its
+        # covariance estimator gives it, so the prior counts exactly as much as it should
+        data_weight = _data_weight(sol, cov_d)
+        target = sub.to_theta([nominal[n] for n in fitted])
+        sol = METHODS[st.method](
+            _WithPrior(objective(cal, eq, base, sub), target, precision, data_weight),
+            sol.x,
+            (lo_f, hi_f),
+            st.max_iterations,
+        )
+        sol.fun = sol.fun[: -len(fitted)]
+        sol.jac = sol.jac[: -len(fitted)]
+        stages.append({"zeta0": zeta0, "prior": True, "cost": float(sol.cost), "nit": int(sol.nit),
+                       "nfev": int(sol.nfev), "njev": int(sol.njev),
+                       "success": bool(sol.success), "message": sol.message})  # fmt: skip
+        cov_f = np.linalg.inv(np.linalg.inv(cov_d) + np.diag(precision))
+        estimator += "; combined with the model file's priors (MAP)"
+    else:
+        precision, cov_f = np.zeros(len(fitted)), cov_d
     t_fit = time.perf_counter()
 
-    values = space.as_dict(space.to_physical(sol.x))
-    m, n = sol.jac.shape
-    D = space.dp_dtheta(sol.x)
-    cov = np.linalg.pinv(sol.jac.T @ sol.jac) * (2 * sol.cost / max(m - n, 1)) * np.outer(D, D)
+    values = {**sub.as_dict(sub.to_physical(sol.x)), **{n: nominal[n] for n in held}}
+    values = {n: values[n] for n in names}
+    x_all = space.to_theta([values[n] for n in names])
+    jac_all = objective(cal, eq)(x_all, True)[1] if held else None
+    cov = _with_held(space, x_all, fitted, cov_f, held, jac_all, model, cov_d, precision)
+    status = {n: held[n]["status"] if n in held else "fitted" for n in names}
+    reasons = {n: held[n]["reason"] for n in held}
     model_cal = model_s.with_values(values)
     asm_cal = model_cal.assemble()
     modes_cal = modal_analysis(asm_cal.M, asm_cal.K)
@@ -281,25 +338,34 @@ def calibrate_linear(
         default_zeta=model.damping.default_zeta,
         per_mode={pr.model_mode: pr.zeta for pr in pairs if pr.model_mode is not None},
     )
+    zeta_std = {
+        pr.model_mode: float(fit.x_std[fit.n_modes + pr.test_index])
+        for pr in pairs
+        if pr.model_mode is not None and fit.x_std is not None
+    }
     if st.keep_sensor_masses or not masses:
         out_model = model_cal.with_damping(damping)
     else:
-        out_model = _without_sensors(model.with_values(values), model_cal, damping)
+        out_model, numbers = _without_sensors(model.with_values(values), model_cal, damping)
+        zeta_std = {numbers[k]: v for k, v in zeta_std.items()}
 
     def deviations(x: np.ndarray, m_: Model) -> dict[str, Any]:
         return _deviations(every, x, m_, run_frfs.channels, f, H, f_max, cal, val)
 
     validation = {
         "before": deviations(x0, model_s),
-        "after": deviations(sol.x, model_cal.with_damping(damping)),
+        "after": deviations(x_all, model_cal.with_damping(damping)),
     }
     t_end = time.perf_counter()
     log.info("linear calibration: %s, %d iterations, cost %.4g", sol.message, sol.nit, sol.cost)
     return LinearCalibration(
-        x=sol.x, cost=float(sol.cost), jac=sol.jac, cov=cov,
+        x=x_all, cost=float(sol.cost), jac=sol.jac, cov=cov,
         nfev=sum(g["nfev"] for g in stages), njev=sum(g["njev"] for g in stages),
         nit=sum(g["nit"] for g in stages), success=sol.success, message=sol.message,
-        names=tuple(names), stages=stages,
+        names=tuple(names), stages=stages, status=status, status_reason=reasons,
+        prior_rel_std={n: model.parameters[n].prior_rel_std for n in names},
+        damping_rel_std=zeta_std,
+        covariance_estimator=estimator,
         parameters=values, start=space.as_dict(p0), zeta0=zeta0,
         metric_frequency_hz=eq.frequency_hz,
         calibration_channels=tuple(run_frfs.channels[i] for i in cal),
@@ -313,6 +379,152 @@ def calibrate_linear(
                  "validation_s": t_end - t_fit, "total_s": t_end - t0},
         unidentified_modes=unidentified,
     )  # fmt: skip
+
+
+# -- what the test determines -----------------------------------------------------------------
+def _mode_clusters(n_modes: int, n_per_band: int, n_channels: int, use_phase: bool) -> np.ndarray:
+    """The (identified mode, channel) each calibration residual belongs to (residuals are
+    ordered ``(metric frequency, channel)``, the metric frequencies mode by mode, then the
+    phases, which share their magnitude's cluster)."""
+    per = np.arange(n_modes * n_channels).reshape(n_modes, 1, n_channels)
+    per = np.repeat(per, n_per_band, axis=1).ravel()
+    return np.concatenate([per, per]) if use_phase else per
+
+
+def data_covariance(jac: np.ndarray, fun: np.ndarray, clusters: np.ndarray):
+    """Covariance of a log-magnitude fit in scaled coordinates, and which estimator gave it.
+
+    The residuals of one channel at one mode's metric frequencies all come from that mode's
+    identified frequency, damping and modal constant: they are not independent, and the
+    textbook ``s^2 (J^T J)^-1`` (``s^2 = 2 cost / (m - n)``) treats them as if they were. The
+    cluster-robust (sandwich) estimator with one cluster per (identified mode, channel),
+    ``c (J^T J)^-1 (sum_g J_g^T r_g r_g^T J_g) (J^T J)^-1`` with the small-sample factor
+    ``c = G / (G - 1) (m - 1) / (m - n)`` (CR1), allows any correlation inside a mode. Each
+    parameter's variance is the larger of the two (the sandwich, from few clusters, is itself
+    uncertain and can come out smaller by chance); the correlations are the textbook ones.
+    """
+    m, n = jac.shape
+    A = np.linalg.pinv(jac.T @ jac)
+    s2 = float(fun @ fun) / max(m - n, 1)
+    formal = A * s2
+    groups = np.unique(clusters)
+    G = groups.size
+    if G <= n:
+        return formal, f"textbook s^2 (J^T J)^-1 ({G} clusters are too few for the sandwich)"
+    scores = np.array([jac[clusters == g].T @ fun[clusters == g] for g in groups])
+    robust = (G / (G - 1)) * ((m - 1) / max(m - n, 1)) * (A @ (scores.T @ scores) @ A)
+    scale = np.sqrt(np.maximum(np.diag(robust) / np.maximum(np.diag(formal), 1e-300), 1.0))
+    return formal * np.outer(scale, scale), (
+        f"per parameter the larger of the textbook s^2 (J^T J)^-1 and the cluster-robust "
+        f"sandwich over {G} (identified mode, channel) clusters"
+    )
+
+
+def decide_weak(model: Model, space: ParameterSpace, x: np.ndarray, cov: np.ndarray) -> dict:
+    """The fitted parameters to hold at their nominal value, with why.
+
+    A parameter at a bound of its range is not a calibrated value: the fit ran out of room,
+    whatever the data say. A parameter with a prior (``prior_rel_std``) of which the test
+    carries less than half the information, once combined with the priors of all
+    (``1 - posterior variance / prior variance < 1/2``, in scaled coordinates: relative for
+    linear, of ``ln p`` for log scaling), is one the test says less about than was known
+    before it: the fitted value mostly follows the noise and the other parameters' errors.
+    Either is held at ``nominal``: with its prior uncertainty (``"held"``), or, without a
+    prior, with none known (``"at_bound"``). ``cov`` is the data-only covariance of ``x``.
+    """
+    lo, hi = space.theta_bounds()
+    precision = _prior_precision(model, space.names)
+    post = np.linalg.inv(np.linalg.inv(cov) + np.diag(precision))
+    share = 1.0 - np.diag(post) * precision  # the data's share of each parameter's information
+    out: dict[str, dict[str, Any]] = {}
+    for i, name in enumerate(space.names):
+        p = model.parameters[name]
+        prior = p.prior_rel_std
+        unit = f" {p.unit}" if p.unit else ""
+        span = max(hi[i] - lo[i], 1e-12)
+        side = ""
+        if x[i] - lo[i] < 1e-6 * span:
+            side = "lower"
+        elif hi[i] - x[i] < 1e-6 * span:
+            side = "upper"
+        if side:
+            bound = p.lower if side == "lower" else p.upper
+            why = f"the fit ran to its {side} bound {bound:.4g}{unit}"
+        elif prior is not None and share[i] < 0.5:
+            why = (
+                f"the test carries {100 * share[i]:.0f} % of its information (alone it "
+                f"determines it to +-{100 * np.sqrt(cov[i, i]):.3g} %; the prior: "
+                f"+-{100 * prior:.3g} %)"
+            )
+        else:
+            continue
+        held_at = f"held at its nominal {p.nominal:.4g}{unit}"
+        if prior is not None:
+            out[name] = {
+                "status": "held",
+                "reason": f"{why}: {held_at} with the prior's +-{100 * prior:.3g} %",
+            }
+        else:
+            out[name] = {"status": "at_bound", "reason": (
+                f"{why}: {held_at}; no prior is known (give prior_rel_std in the model file), "
+                "so its uncertainty is not known")}  # fmt: skip
+    return out
+
+
+def _prior_precision(model: Model, names) -> np.ndarray:
+    """``1 / prior_rel_std^2`` per parameter in scaled coordinates (0: no prior)."""
+    return np.array([0.0 if model.parameters[n].prior_rel_std is None
+                     else model.parameters[n].prior_rel_std ** -2 for n in names])  # fmt: skip
+
+
+def _data_weight(sol, cov_d: np.ndarray) -> float:
+    """The residual scale ``w`` for which ``w^2 (J^T J)^-1`` has, on average over the
+    parameters, the variance of the data covariance ``cov_d``: the data's cost divided by
+    ``w^2`` is then their log-likelihood as that estimator sees it."""
+    formal = np.diag(np.linalg.pinv(sol.jac.T @ sol.jac))
+    return float(np.sqrt(np.mean(np.diag(cov_d) / np.maximum(formal, 1e-300))))
+
+
+class _WithPrior:
+    """A residual function with the priors appended: ``w (theta - target) / sigma_prior``
+    per parameter (0 where no prior), so ``1/2 |r|^2 / w^2`` is the negative log posterior."""
+
+    def __init__(self, objective, target, precision, weight) -> None:
+        self.objective, self.target = objective, np.asarray(target, float)
+        self.scale = weight * np.sqrt(precision)
+
+    def __call__(self, theta, want_jac: bool = True):
+        r, J = self.objective(theta, want_jac)
+        rp = self.scale * (np.asarray(theta, float) - self.target)
+        r = np.concatenate([r, rp])
+        return r, (None if J is None else np.vstack([J, np.diag(self.scale)]))
+
+
+def _with_held(space, x_all, fitted, cov_f, held, jac_all, model, cov_d, precision):
+    """Physical covariance of every parameter: the fitted ones' (``cov_f``) plus what the held
+    ones' prior uncertainty does to them (a held value off by ``d theta_h`` moves the fitted
+    ones by ``G d theta_h``, ``G = -(cov_d^-1 + P)^-1 cov_d^-1 (J_f^T J_f)^-1 J_f^T J_h``: the
+    data-only move, shrunk as the priors ``P`` shrink the fit); a held one's own variance is
+    its prior's (NaN where no prior is known)."""
+    names = list(space.names)
+    idx_f = [names.index(n) for n in fitted]
+    n = len(names)
+    cov = np.zeros((n, n))
+    cov[np.ix_(idx_f, idx_f)] = cov_f
+    if held:
+        idx_h = [names.index(h) for h in held]
+        prior = np.array([model.parameters[h].prior_rel_std or np.nan for h in held])
+        known = np.isfinite(prior)
+        Jf, Jh = jac_all[:, idx_f], jac_all[:, idx_h]
+        move = np.linalg.lstsq(Jf, Jh, rcond=None)[0]
+        G = -cov_f @ np.linalg.solve(cov_d, move)
+        S = np.diag(np.where(known, prior, 0.0) ** 2)
+        cov[np.ix_(idx_f, idx_f)] += G @ S @ G.T
+        cov[np.ix_(idx_f, idx_h)] = G @ S
+        cov[np.ix_(idx_h, idx_f)] = S @ G.T
+        cov[np.ix_(idx_h, idx_h)] = S + np.diag(np.where(known, 0.0, np.nan))
+    D = space.dp_dtheta(x_all)
+    return cov * np.outer(D, D)
 
 
 # -- helpers ------------------------------------------------------------------------------
@@ -406,12 +618,15 @@ def _unidentified_modes(model: Model, asm, modes, names, pairs, band) -> list[di
     ]  # fmt: skip
 
 
-def _without_sensors(bare: Model, loaded: Model, damping: DampingSpec) -> Model:
-    """``bare`` with ``damping``'s mode numbers (of ``loaded``) carried over by MAC."""
+def _without_sensors(bare: Model, loaded: Model, damping: DampingSpec):
+    """``bare`` with ``damping``'s mode numbers (of ``loaded``) carried over by MAC, and the
+    carried numbers (``loaded``'s mode -> ``bare``'s)."""
     a, b = loaded.assemble(), bare.assemble()
     numbers = renumber_modes(a.M, a.K, b.M, b.K, list(damping.per_mode))
     per_mode = dict(zip(numbers, damping.per_mode.values(), strict=True))
-    return bare.with_damping(DampingSpec(damping.default_zeta, per_mode))
+    return bare.with_damping(DampingSpec(damping.default_zeta, per_mode)), dict(
+        zip(damping.per_mode, numbers, strict=True)
+    )
 
 
 def _rms(x: np.ndarray) -> float | None:

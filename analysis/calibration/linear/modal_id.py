@@ -64,6 +64,11 @@ class ModalFit:
         Of the final pole iteration (``x = [log omega_r, log zeta_r]``, cost as scipy).
     rms_relative_error : float
         RMS of ``|H_fit - H| / |H|`` over the fitted points.
+    x_std : ndarray, shape (2 m,) or None
+        Standard deviations of ``x`` (so of ``ln omega_r`` and ``ln zeta_r``: relative ones)
+        from the pole iteration's Jacobian, ``(J^T J)^-1`` scaled by the chi-square per
+        degree of freedom where that exceeds 1 (the residuals are weighted by the FRFs'
+        standard errors when they are given); None without poles.
     """
 
     omega: np.ndarray
@@ -78,6 +83,7 @@ class ModalFit:
     success: bool
     message: str
     rms_relative_error: float
+    x_std: np.ndarray | None = None
 
     @property
     def frequency_hz(self) -> np.ndarray:
@@ -242,8 +248,12 @@ def fit_poles(
             max_nfev=max_nfev,
         )
         x, nfev, ok, msg = sol.x, sol.nfev, sol.success, sol.message
+        dof = max(sol.fun.size - x.size, 1)
+        scale = max(1.0, float(sol.fun @ sol.fun) / dof)
+        x_std = np.sqrt(np.maximum(np.diag(np.linalg.pinv(sol.jac.T @ sol.jac)), 0) * scale)
     else:
         x, nfev, ok, msg = x0, 1, True, "no poles: residual terms only"
+        x_std = None
     res, coef, _ = proj.solve(x, False)
     cost = 0.5 * float(np.sum(res**2))
     order = np.argsort(x[:m])
@@ -263,6 +273,7 @@ def fit_poles(
         success=bool(ok),
         message=str(msg),
         rms_relative_error=float(np.sqrt(np.mean(np.abs(rel) ** 2))),
+        x_std=None if x_std is None else _ro(np.concatenate([x_std[:m][order], x_std[m:][order]])),
     )
 
 

@@ -31,9 +31,10 @@ class LinearCalibration:
     jac : ndarray, shape (m, n)
         Jacobian of the residuals at ``x``.
     cov : ndarray, shape (n, n)
-        Covariance of the physical parameters, ``D (J^T J)^-1 D s^2`` with ``D = dp/dtheta``
-        and the residual variance ``s^2 = 2 cost / (m - n)``. The residuals at neighbouring
-        metric frequencies are correlated, so this is a formal (optimistic) figure.
+        Covariance of the physical parameters, every parameter's, held ones included: the
+        fitted ones' from the data (``covariance_estimator`` says which estimator:
+        :func:`~analysis.calibration.linear.calibrate.data_covariance`) plus what the held
+        ones' prior uncertainty does to them; a held one's own variance is its prior's.
     nfev, njev, nit : int
         Totals over the damping-continuation stages.
     success : bool
@@ -60,6 +61,18 @@ class LinearCalibration:
         damping).
     settings : dict
     timings : dict of str to float, s
+    status : dict name -> str
+        ``"fitted"``; ``"held"`` (at its nominal value with its prior uncertainty: the test
+        does not determine it better than the prior, or it ran to a bound); ``"at_bound"``
+        (ran to a bound and no prior is known: held at nominal, uncertainty unknown).
+    status_reason : dict name -> str
+        Why each parameter that is not fitted is held.
+    prior_rel_std : dict name -> float or None
+        The model file's priors.
+    covariance_estimator : str
+    damping_rel_std : dict int -> float
+        Relative standard deviation of each mode's identified damping ratio (the pole fit's),
+        by the calibrated model's mode number as in ``damping``.
     unidentified_modes : list of dict
         Modes of the calibrated model (with the sensors) inside the band that no test mode was
         paired with: ``model_mode``, ``frequency_hz`` and ``sensitivity`` (name ->
@@ -95,6 +108,11 @@ class LinearCalibration:
     source: str = ""
     timings: dict[str, float] = field(default_factory=dict)
     unidentified_modes: list[dict[str, Any]] = field(default_factory=list)
+    status: dict[str, str] = field(default_factory=dict)
+    status_reason: dict[str, str] = field(default_factory=dict)
+    prior_rel_std: dict[str, float | None] = field(default_factory=dict)
+    covariance_estimator: str = ""
+    damping_rel_std: dict[int, float] = field(default_factory=dict)
 
     @property
     def std(self) -> dict[str, float]:
@@ -107,24 +125,37 @@ class LinearCalibration:
         s = np.sqrt(np.diag(self.cov))
         return self.cov / np.maximum(np.outer(s, s), 1e-300)
 
+    def held(self) -> dict[str, str]:
+        """Parameters not fitted (held at their nominal value): name -> why."""
+        return {n: self.status_reason.get(n, "") for n in self.names
+                if self.status.get(n, "fitted") != "fitted"}  # fmt: skip
+
     def undetermined(self, max_relative_std: float = 0.05) -> dict[str, float]:
-        """Parameters the test does not determine: name -> relative standard deviation, for
-        those above ``max_relative_std`` (default 5 %), largest first."""
+        """Parameters the test leaves uncertain: name -> relative standard deviation, for the
+        held ones and the fitted ones above ``max_relative_std`` (default 5 %), largest
+        first (NaN: a held parameter with no known prior)."""
         rel = {n: self.std[n] / abs(self.parameters[n]) for n in self.names if self.parameters[n]}
-        bad = {n: r for n, r in rel.items() if r > max_relative_std}
-        return dict(sorted(bad.items(), key=lambda kv: -kv[1]))
+        bad = {n: r for n, r in rel.items()
+               if n in self.held() or not r <= max_relative_std}  # fmt: skip
+        return dict(sorted(bad.items(), key=lambda kv: -kv[1] if np.isfinite(kv[1]) else -np.inf))
 
     def identifiability_notes(self, max_relative_std: float = 0.05) -> list[str]:
-        """Plain-language lines on the parameters the test leaves undetermined: their
-        uncertainty, the model modes in the band without a test mode that they act on (the
-        measurement that would determine them) and what to do; empty when all are determined."""
+        """Plain-language lines on the parameters the test does not determine: which are
+        held at their prior and why, which are fitted but uncertain, the model modes in the
+        band without a test mode that they act on (the measurement that would determine
+        them); empty when all are determined."""
         bad = self.undetermined(max_relative_std)
         if not bad:
             return []
-        lines = [
-            f"  not determined by this test (relative std above {100 * max_relative_std:g} %): "
-            + ", ".join(f"{n} ({100 * r:.3g} %)" for n, r in bad.items())
-        ]
+        held = self.held()
+        lines = [f"  held at its nominal value: {n}: {why}" for n, why in held.items()]
+        loose = {n: r for n, r in bad.items() if n not in held}
+        if loose:
+            lines.append(
+                f"  fitted, but uncertain (relative std above {100 * max_relative_std:g} %, held "
+                "parameters' priors included): "
+                + ", ".join(f"{n} ({100 * r:.3g} %)" for n, r in loose.items())
+            )
         for n in bad:
             acts = sorted(
                 (m for m in self.unidentified_modes if abs(m["sensitivity"].get(n, 0.0)) > 1e-3),
@@ -137,8 +168,8 @@ class LinearCalibration:
                                 for m in acts[:3])
                 )  # fmt: skip
         lines.append(
-            "    keep them at their nominal values (calibrate the others with --parameters), "
-            "or measure the modes they act on (more response there: level, averages, points)"
+            "    to determine them: measure the modes they act on (more response there: "
+            "level, averages, points); their uncertainty is carried into every later result"
         )
         return lines
 
@@ -181,9 +212,20 @@ class LinearCalibration:
                 "modes": [m.to_json() for m in self.modes],
             },
             "damping_per_mode": {str(k): v for k, v in self.damping.items()},
+            "damping_rel_std": {str(k): v for k, v in self.damping_rel_std.items()},
             "validation": self.validation,
             "settings": self.settings,
             "timings": self.timings,
             "undetermined": self.undetermined(),
+            "status": {n: self.status.get(n, "fitted") for n in self.names},
+            "status_reason": self.status_reason,
+            "held": self.held(),
+            "prior_rel_std": self.prior_rel_std,
+            "covariance_estimator": self.covariance_estimator,
+            "units": {n: self.model.parameters[n].unit for n in self.names},
+            "interval_95": {
+                n: [self.parameters[n] - 1.96 * sd, self.parameters[n] + 1.96 * sd]
+                for n, sd in self.std.items()
+            },  # fmt: skip
             "unidentified_modes": self.unidentified_modes,
         }
