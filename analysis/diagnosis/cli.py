@@ -29,23 +29,38 @@ from analysis.predict_branches import BranchMatchedPredictor
 __all__ = ["add_parsers"]
 
 
+def _value(v) -> str:
+    """A progress value as text: numbers short, a mapping as ``name=value`` pairs."""
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k}={_value(x)}" for k, x in v.items()) + "}"
+    return str(v)
+
+
 def _progress(quiet: bool):
+    """The progress printer of the diagnosis commands: ``show(stage, info)`` to stderr.
+
+    Every event kind the diagnosis, the screen, the refit and the augmentation emit is printed:
+    the per-candidate ``"screen"``/``"refine"`` and per-start ``"start"`` counters (every 25th
+    and the last), ``"lm"`` iterations, and any other event (including a ``"screen"`` event
+    without a counter, as the augmentation sends with the screen's values) as its fields.
+    """
     t0 = time.perf_counter()
 
     def show(stage: str, info: dict) -> None:
         if quiet:
             return
         t = time.perf_counter() - t0
-        if stage in ("screen", "refine"):
+        if stage in ("screen", "refine", "start") and "index" in info and "n" in info:
             if info["index"] + 1 == info["n"] or info["index"] % 25 == 0:
                 print(f"[{t:6.1f} s] {stage} {info['index'] + 1}/{info['n']}", file=sys.stderr)
             return
-        if stage == "lm":
+        if stage == "lm" and "iteration" in info and "cost" in info:
             print(f"[{t:6.1f} s] LM iteration {info['iteration']}: metric {info['cost']:.6g}",
                   file=sys.stderr)  # fmt: skip
             return
-        text = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
-                         for k, v in info.items() if not isinstance(v, dict | list))  # fmt: skip
+        text = ", ".join(f"{k} {_value(v)}" for k, v in info.items() if not isinstance(v, list))
         print(f"[{t:6.1f} s] {stage}: {text}", file=sys.stderr)
 
     return show
