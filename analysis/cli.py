@@ -256,13 +256,15 @@ def cmd_demo(args) -> dict:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    # The commands are listed once, by argparse from each command's help (the module
+    # docstring's table is for readers of the code, not for --help).
     p = argparse.ArgumentParser(
         prog="python -m analysis",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Command line of the analysis side: python -m analysis COMMAND ...",
+        epilog="Every command has --help.",
     )
     p.add_argument("-v", "--verbose", action="store_true", help="log progress")
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, title="commands", metavar="COMMAND")
 
     def common(sp, model=True):
         if model:

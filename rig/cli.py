@@ -104,11 +104,15 @@ def cmd_amplifier(args) -> dict:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    # The commands are listed once, by argparse from each command's help; the module
+    # docstring's own table stays out of --help (it listed every command a second time).
     p = argparse.ArgumentParser(
-        prog="rig", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog="rig",
+        description="Command line of the acquisition side: rig COMMAND ...",
+        epilog="Every command has --help.",
     )
     p.add_argument("-v", "--verbose", action="store_true", help="log progress")
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, title="commands", metavar="COMMAND")
 
     sp = sub.add_parser("backends", help="list DAQ backends and check them")
     sp.add_argument("--device", default="Dev1", help="NI device name (default Dev1)")

@@ -158,3 +158,16 @@ def test_run_linear_and_export(files, tmp_path):
         assert json.loads(r.stdout)["sets"] == n
     r = _rig("export-uff", out, tmp_path / "run.uff")
     assert r.returncode == 2 and "file exists" in r.stderr
+
+
+def test_top_level_help_lists_each_command_once():
+    """``rig --help`` names every command on one line of its own, once."""
+    from rig.cli import build_parser
+
+    text = build_parser().format_help()
+    names = list(build_parser()._subparsers._group_actions[0].choices)
+    assert len(names) > 10
+    for name in names:
+        lines = [ln for ln in text.splitlines() if ln.split()[:1] == [name]]
+        assert len(lines) == 1, (name, lines)
+    assert "{" not in text  # no {a,b,...} list of every command in the usage
