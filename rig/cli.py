@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import re
 import sys
 
 from rig.backends import available_backends, open_backend
@@ -237,6 +238,20 @@ def cmd_gui(args) -> int:
     )
 
 
+def file_exists_message(exc: FileExistsError) -> str:
+    """An existing output file in the words of the command line: ``--overwrite`` replaces it.
+
+    The library names its argument (``overwrite=True``); every ``rig`` command that writes a
+    file offers ``--overwrite``.
+    """
+    from analysis.measurement_file import OutputExistsError
+
+    if isinstance(exc, OutputExistsError):
+        return exc.rephrased("--overwrite")
+    # rig.runner and rig.export_uff raise a plain FileExistsError with the library's wording
+    return re.sub(r"(pass|use) (--)?overwrite(=True)?\b", "pass --overwrite", str(exc))
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(
@@ -248,6 +263,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except FileExistsError as exc:
+        print(f"error: {file_exists_message(exc)}", file=sys.stderr)
+        return EXIT_USAGE
     except (OSError, ValueError, RuntimeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -47,6 +47,7 @@ Examples
 """
 
 from .data import RandomData, RawRecord, RunData, SteppedSineData
+from .layout import OutputExistsError
 from .random_writer import write_random
 from .reader import read_measurement, read_raw
 from .records import Actuator, ChannelInfo, RandomFRF, StepRecord
@@ -80,6 +81,7 @@ __all__ = [
     "ChannelInfo",
     "FieldValueError",
     "MeasurementFileError",
+    "OutputExistsError",
     "RandomData",
     "RandomFRF",
     "RawRecord",
