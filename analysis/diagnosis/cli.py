@@ -22,6 +22,7 @@ from analysis.diagnosis.candidates import default_candidates
 from analysis.diagnosis.compare import compare
 from analysis.diagnosis.diagnose import diagnose
 from analysis.diagnosis.result import DiagnosisSettings
+from analysis.logs import add_debug_option, configure_logging, summarise_repeats
 from analysis.measurement_file import SteppedSineData, read_measurement
 from analysis.model import load_model
 from analysis.predict_branches import BranchMatchedPredictor
@@ -86,7 +87,8 @@ def cmd_compare(args) -> dict:
     """Residual blocks of a model against a file; figures with ``--figures``."""
     model, data = _model(args), _stepped(args.run)
     pred = BranchMatchedPredictor(model, data, n_harmonics=args.harmonics, n_time=args.samples)
-    cmp = compare(model, data, predictor=pred, sigma=args.sigma)
+    with summarise_repeats("compare"):
+        cmp = compare(model, data, predictor=pred, sigma=args.sigma)
     if args.figures:
         from analysis.report.diagnosis_figures import (
             plot_frequency_level_map,
@@ -113,8 +115,9 @@ def _settings(args) -> DiagnosisSettings:
 def cmd_diagnose(args) -> dict:
     """Which effect is missing."""
     model, data = _model(args), _stepped(args.run)
-    result = diagnose(model, data, linear_run=args.linear_run, settings=_settings(args),
-                      progress=_progress(args.json))  # fmt: skip
+    with summarise_repeats("diagnose"):
+        result = diagnose(model, data, linear_run=args.linear_run, settings=_settings(args),
+                          progress=_progress(args.json))  # fmt: skip
     if args.figures:
         from analysis.report.diagnosis_figures import plot_diagnosis
 
@@ -137,8 +140,9 @@ def cmd_augment(args) -> dict:
             raise ValueError(f"no candidate {args.candidate!r} (e.g. {labels}; ...)")
         cand = matches[0]
     else:
-        diag = diagnose(model, data, linear_run=args.linear_run, settings=_settings(args),
-                        progress=show)  # fmt: skip
+        with summarise_repeats("diagnose"):
+            diag = diagnose(model, data, linear_run=args.linear_run, settings=_settings(args),
+                            progress=show)  # fmt: skip
         if diag.verdict != "explained":
             raise RuntimeError(
                 f"the diagnosis claims nothing to add (verdict: {diag.verdict}); name a "
@@ -148,9 +152,11 @@ def cmd_augment(args) -> dict:
         cand = best.candidate
         values, known = best.start_values()
         show("chosen", {"candidate": cand.label})
-    result = augment(model, data, cand, values=values, known=known, linear_run=args.linear_run,
-                     n_starts=args.starts, reweight_passes=args.reweight, out=args.out,
-                     progress=show, n_harmonics=args.harmonics, n_time=args.samples)  # fmt: skip
+    with summarise_repeats("augment"):
+        result = augment(model, data, cand, values=values, known=known,
+                         linear_run=args.linear_run, n_starts=args.starts,
+                         reweight_passes=args.reweight, out=args.out, progress=show,
+                         n_harmonics=args.harmonics, n_time=args.samples)  # fmt: skip
     if args.figures:
         from analysis.report.diagnosis_figures import plot_before_after, plot_error_history
 
@@ -222,14 +228,12 @@ def add_parsers(subparsers) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Stand-alone entry: ``python -m analysis.diagnosis.cli diagnose ...``."""
     import json
-    import logging
 
     parser = argparse.ArgumentParser(prog="python -m analysis.diagnosis.cli")
-    parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
+    add_debug_option(parser)
     add_parsers(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")  # fmt: skip
+    configure_logging(args)
     try:
         result = args.func(args)
     except (ValueError, OSError, RuntimeError) as exc:
