@@ -19,7 +19,7 @@ from pathlib import Path
 
 from analysis.diagnosis.augment import augment
 from analysis.diagnosis.candidates import default_candidates
-from analysis.diagnosis.compare import compare
+from analysis.diagnosis.compare import compare, uncalibrated_note
 from analysis.diagnosis.diagnose import diagnose
 from analysis.diagnosis.result import DiagnosisSettings
 from analysis.logs import add_debug_option, configure_logging, summarise_repeats
@@ -83,6 +83,13 @@ def _model(args):
     return model.with_values(values) if values else model
 
 
+def _note_uncalibrated(model) -> None:
+    """Say on stderr when the model has not been calibrated (a diagnosis would find that)."""
+    note = uncalibrated_note(model)
+    if note:
+        print(f"note: {note}", file=sys.stderr)
+
+
 def cmd_compare(args) -> dict:
     """Residual blocks of a model against a file; figures with ``--figures``."""
     model, data = _model(args), _stepped(args.run)
@@ -115,6 +122,7 @@ def _settings(args) -> DiagnosisSettings:
 def cmd_diagnose(args) -> dict:
     """Which effect is missing."""
     model, data = _model(args), _stepped(args.run)
+    _note_uncalibrated(model)
     with summarise_repeats("diagnose"):
         result = diagnose(model, data, linear_run=args.linear_run, settings=_settings(args),
                           progress=_progress(args.json))  # fmt: skip
@@ -131,6 +139,7 @@ def cmd_diagnose(args) -> dict:
 def cmd_augment(args) -> dict:
     """Add the chosen effect (or the best of a diagnosis), recalibrate, compare."""
     model, data = _model(args), _stepped(args.run)
+    _note_uncalibrated(model)
     show = _progress(args.json)
     values = known = None
     if args.candidate:

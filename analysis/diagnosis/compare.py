@@ -23,7 +23,7 @@ from analysis.model import Model
 from analysis.predict import SteppedSinePredictor
 from analysis.predict_branches import BranchMatchedPredictor
 
-__all__ = ["Block", "Comparison", "compare"]
+__all__ = ["Block", "Comparison", "compare", "uncalibrated_note"]
 
 
 @dataclass(frozen=True)
@@ -73,6 +73,7 @@ class Comparison:
     predicted: np.ndarray
     alpha: float
     left_out: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    notes: list[str] = field(default_factory=list)
 
     @property
     def chi2_per_dof(self) -> float:
@@ -116,6 +117,7 @@ class Comparison:
         else:
             lines.append(f"{len(fails)} of {len(self.blocks)} blocks fail; the worst:")
             lines += ["  " + b.verdict for b in fails[:n]]
+        lines += [f"note: {t}" for t in self.notes]
         return "\n".join(lines)
 
     def to_json(self) -> dict:
@@ -125,8 +127,30 @@ class Comparison:
             "adequate": self.adequate,
             "alpha": self.alpha,
             "left_out_steps": self.left_out.tolist(),
+            "notes": list(self.notes),
             "blocks": [{**b.__dict__, "verdict": b.verdict} for b in self.blocks],
         }
+
+
+def uncalibrated_note(model: Model) -> str | None:
+    """A note when every parameter the model calibrates is still at its nominal value.
+
+    Such a model (the shipped reference rig, or a new model file) has not been calibrated, so a
+    misfit of tens of times the noise says that, not that the model misses an effect. None when
+    the model has been calibrated (some calibrated parameter left its nominal value) or
+    calibrates nothing.
+    """
+    params = [p for p in model.parameters.values() if p.calibrate]
+    if not params or any(not np.isclose(p.value, p.nominal, rtol=1e-9, atol=0.0) for p in params):
+        return None
+    names = ", ".join(p.name for p in params)
+    return (
+        f"the model's calibrated parameters ({names}) are all at their nominal values: it has "
+        "not been calibrated yet, and the misfit says so. Calibrate it first: "
+        "'python -m analysis calibrate-linear RANDOM.h5 --model MODEL --out LIN' (the linear "
+        "part, from a random test), then 'python -m analysis calibrate RUN.h5 --model "
+        "LIN/calibrated_model.toml --out CAL', and compare CAL/calibrated_model.toml"
+    )
 
 
 def default_bands(frequency_hz: np.ndarray, n_bands: int = 3) -> list[tuple[float, float]]:
@@ -226,4 +250,5 @@ def compare(
         p.frf,
         alpha,
         np.flatnonzero(left_out),
+        [t for t in [uncalibrated_note(model)] if t],
     )
