@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.logs import add_debug_option, configure_logging, summarise_repeats
+from analysis.logs import add_debug_option, configure_logging, note_inputs, summarise_repeats
 from analysis.mhb.continuation import ContinuationSettings, continue_branch
 from analysis.mhb.sweep import solve_steps
 from analysis.model import load_model
@@ -336,6 +336,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     configure_logging(args)
+    note_inputs(args)
     try:
         # the command is one stage; the diagnosis and planning commands name their own inside
         with summarise_repeats(args.command):

@@ -25,8 +25,8 @@ import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
-__all__ = ["MHB_NOT_CONVERGED", "Repeated", "StageCounts", "add_debug_option",
-           "configure_logging", "summarise_repeats"]  # fmt: skip
+__all__ = ["INPUT_FILE_OPTIONS", "MHB_NOT_CONVERGED", "Repeated", "StageCounts",
+           "add_debug_option", "configure_logging", "note_inputs", "summarise_repeats"]  # fmt: skip
 
 log = logging.getLogger("analysis")
 
@@ -186,3 +186,23 @@ def configure_logging(args) -> None:
     )
     if debug:
         logging.getLogger("analysis").setLevel(logging.DEBUG)
+
+
+#: The options of the analysis commands that name a measurement file the command reads.
+INPUT_FILE_OPTIONS = ("run", "linear_run")
+
+
+def note_inputs(args, logger: logging.Logger | None = None) -> list[str]:
+    """Log a WARNING note for each input measurement file whose run did not end normally.
+
+    An incomplete file (status ``running`` or ``aborted``/``failed``) is analysed as it is, its
+    recorded steps only; the note says so, with the steps recorded against those planned and
+    the reason the run ended (:func:`analysis.measurement_file.incomplete_note`).
+    """
+    from analysis.measurement_file import input_notes
+
+    paths = [getattr(args, name, None) for name in INPUT_FILE_OPTIONS]
+    notes = input_notes([p for p in paths if isinstance(p, str)])
+    for note in notes:
+        (logger or log).warning("note: %s", note)
+    return notes

@@ -14,6 +14,7 @@ import logging
 import numpy as np
 
 from analysis.calibration.parameters import ParameterSpace
+from analysis.measurement_file import require_steps
 from analysis.predict import SteppedSinePredictor
 
 __all__ = ["FRFObjective"]
@@ -43,14 +44,22 @@ class FRFObjective:
         if weighting not in ("uncertainty", "identity"):
             raise ValueError(f"weighting: expected 'uncertainty' or 'identity', got {weighting!r}")
         self.predictor, self.space = predictor, space
+        data = getattr(predictor, "data", None)
+        if data is not None and getattr(data, "n_steps", 1) == 0:
+            require_steps(data)  # names the file and why its run ended
         H, std = predictor.measured()
         n, C, _ = H.shape
         m = np.ones((n, C), bool) if mask is None else np.asarray(mask, bool)
         if m.shape != (n, C):
             raise ValueError(f"mask: expected shape {(n, C)}, got {m.shape}")
+        selected = int(m.any(axis=1).sum())
         m = m & np.all(np.isfinite(H), axis=2)
         if not m.any():
-            raise ValueError("the selection contains no measured FRF")
+            where = f"{data.path}: " if data is not None and hasattr(data, "path") else ""
+            raise ValueError(
+                f"{where}the selection contains no measured FRF ({selected} of {n} steps "
+                "selected, none with a finite FRF)"
+            )
         self.mask = m
         self.rows = np.flatnonzero(m.any(axis=1))
         self.H = H

@@ -22,8 +22,8 @@ from analysis.diagnosis.candidates import default_candidates
 from analysis.diagnosis.compare import compare, uncalibrated_note
 from analysis.diagnosis.diagnose import diagnose
 from analysis.diagnosis.result import DiagnosisSettings
-from analysis.logs import add_debug_option, configure_logging, summarise_repeats
-from analysis.measurement_file import SteppedSineData, read_measurement
+from analysis.logs import add_debug_option, configure_logging, note_inputs, summarise_repeats
+from analysis.measurement_file import SteppedSineData, read_measurement, require_steps
 from analysis.model import load_model
 from analysis.predict_branches import BranchMatchedPredictor
 
@@ -71,7 +71,7 @@ def _stepped(path: str) -> SteppedSineData:
     data = read_measurement(path)
     if not isinstance(data, SteppedSineData):
         raise ValueError(f"{path}: a stepped-sine run is needed (this is a random run)")
-    return data
+    return require_steps(data)
 
 
 def _model(args):
@@ -243,6 +243,7 @@ def main(argv: list[str] | None = None) -> int:
     add_parsers(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)
     configure_logging(args)
+    note_inputs(args)
     try:
         result = args.func(args)
     except (ValueError, OSError, RuntimeError) as exc:

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from analysis.measurement_file import SteppedSineData
+from analysis.measurement_file import SteppedSineData, require_steps
 from analysis.model import Model
 from analysis.predict import SteppedSinePredictor
 from analysis.predict_branches import BranchMatchedPredictor
@@ -156,6 +156,8 @@ def uncalibrated_note(model: Model) -> str | None:
 def default_bands(frequency_hz: np.ndarray, n_bands: int = 3) -> list[tuple[float, float]]:
     """Bands with equal numbers of steps (resonance regions are sampled densely)."""
     f = np.sort(np.unique(frequency_hz))
+    if f.size == 0:
+        raise ValueError("no frequencies to divide into bands (no steps)")
     edges = np.quantile(f, np.linspace(0, 1, n_bands + 1))
     return [(float(edges[i]), float(edges[i + 1])) for i in range(n_bands)]
 
@@ -200,6 +202,7 @@ def compare(
         Also score the steps the file flags as not converged under force control (by default
         they are left out: their residuals are NaN and :attr:`Comparison.left_out` lists them).
     """
+    require_steps(data)
     pred = predictor or BranchMatchedPredictor(model, data, channels=channels)
     H, s = pred.measured()
     positive = s[np.isfinite(s) & (s > 0)]

@@ -65,6 +65,7 @@ from .schema import (
     MeasurementFileError,
     safe_std,
 )
+from .status import incomplete_note, input_notes, planned_steps, require_steps, status_text
 from .writer import SteppedSineWriter, create_stepped_sine, open_for_resume
 
 __all__ = [
@@ -90,9 +91,14 @@ __all__ = [
     "SteppedSineData",
     "SteppedSineWriter",
     "create_stepped_sine",
+    "incomplete_note",
+    "input_notes",
     "open_for_resume",
+    "planned_steps",
     "read_measurement",
     "read_raw",
+    "require_steps",
     "safe_std",
+    "status_text",
     "write_random",
 ]
