@@ -4,7 +4,9 @@
 between analytical and measured multi-harmonic FRFs of the selected steps, channels and orders.
 By default ``W`` comes from the file's phasor uncertainties (each real and imaginary part divided
 by its standard error, ``sigma / sqrt(2)`` of the complex one, so ``delta`` is a chi-square);
-``weighting="identity"`` is the paper's ``W = I``.
+``weighting="identity"`` is the paper's ``W = I``. A selected FRF with a standard error of
+zero is refused under uncertainty weighting (:func:`~analysis.predict.check_standard_errors`
+says why), never floored nor silently unweighted.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 
 from analysis.calibration.parameters import ParameterSpace
 from analysis.measurement_file import require_steps
-from analysis.predict import SteppedSinePredictor
+from analysis.predict import SteppedSinePredictor, check_standard_errors
 
 __all__ = ["FRFObjective"]
 
@@ -63,9 +65,14 @@ class FRFObjective:
         self.mask = m
         self.rows = np.flatnonzero(m.any(axis=1))
         self.H = H
-        if weighting == "uncertainty" and np.nanmax(std) == 0:
-            log.warning("the file has no phasor uncertainties: using identity weighting")
-            weighting = "identity"
+        if weighting == "uncertainty" and data is not None:
+            # refused, not floored nor silently unweighted (see check_standard_errors)
+            check_standard_errors(
+                data, list(getattr(predictor, "channel_names", [])) or [str(c) for c in range(C)],
+                np.where(m[:, :, None], H, np.nan), std,
+                remedy="calibrate with --identity (W = I, the paper's metric) to fit without "
+                "them, or give the file its standard errors",
+            )  # fmt: skip
         if weighting == "identity":
             self.sigma = np.ones_like(std)
             self._weight = np.ones_like(std)

@@ -20,7 +20,7 @@ from scipy import stats
 
 from analysis.measurement_file import SteppedSineData, require_steps
 from analysis.model import Model
-from analysis.predict import SteppedSinePredictor
+from analysis.predict import SteppedSinePredictor, check_standard_errors
 from analysis.predict_branches import BranchMatchedPredictor
 
 __all__ = ["Block", "Comparison", "compare", "uncalibrated_note"]
@@ -205,8 +205,13 @@ def compare(
     require_steps(data)
     pred = predictor or BranchMatchedPredictor(model, data, channels=channels)
     H, s = pred.measured()
+    scored = np.ones(data.n_steps, bool) if include_unconverged else data.control_converged
+    check_standard_errors(
+        data, pred.channel_names, H, s, rows=scored,
+        remedy="the file's standard errors are needed to score a model in units of the noise",
+    )  # fmt: skip
     positive = s[np.isfinite(s) & (s > 0)]
-    floor = positive.min() if positive.size else 1.0
+    floor = positive.min() if positive.size else 1.0  # only NaN errors (unscored) left to fill
     if isinstance(pred, BranchMatchedPredictor) and sigma == "model":
         # the force's error propagated through the model (see response_sigma)
         p, s = pred.predict_with_sigma()
