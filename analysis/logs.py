@@ -43,11 +43,20 @@ class Repeated:
         Regular expression searched in the formatted message.
     summary : str
         The stage's one WARNING line, ``{n}`` the count.
+    summary_one : str
+        The line for a count of one (default: ``summary``).
     """
 
     logger: str
     pattern: str
     summary: str
+    summary_one: str = ""
+
+    def line(self, n: int) -> str:
+        """The summary line for ``n`` records."""
+        return (
+            (self.summary_one or self.summary).format(n=n) if n == 1 else self.summary.format(n=n)
+        )
 
 
 #: Harmonic-balance steps that did not converge (``analysis.mhb.sweep``): expected by the
@@ -57,6 +66,8 @@ MHB_NOT_CONVERGED = Repeated(
     r"^MHB step \d+ .*did not converge",
     "{n} MHB steps did not converge (expected for trial parameters far from the data); "
     "run with --debug for each",
+    "1 MHB step did not converge (expected for trial parameters far from the data); "
+    "run with --debug to see it",
 )
 
 _ORIGINAL_LEVEL = "repeat_original_levelno"
@@ -163,7 +174,7 @@ def summarise_repeats(
                 lg.removeFilter(_filter)
         for kind, n in counts.counts.items():
             if n:
-                (logger or log).warning("%s: %s", stage, kind.summary.format(n=n))
+                (logger or log).warning("%s: %s", stage, kind.line(n))
 
 
 def add_debug_option(parser) -> None:

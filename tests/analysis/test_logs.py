@@ -102,3 +102,10 @@ def test_the_command_line_prints_one_line_and_every_step_with_debug(tmp_path) ->
     r = subprocess.run([*run, "--debug", "noisy"], capture_output=True, text=True, timeout=120)
     lines = r.stderr.splitlines()
     assert len(lines) == 501 and lines[0].startswith("DEBUG analysis.mhb.sweep: MHB step 0")
+
+
+def test_one_failure_is_said_in_the_singular(caplog) -> None:
+    caplog.set_level(logging.WARNING)
+    with summarise_repeats("compare"):
+        _fail_steps(1)
+    assert caplog.records[0].getMessage().startswith("compare: 1 MHB step did not converge")
