@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.logs import add_debug_option, configure_logging, note_inputs, summarise_repeats
 from analysis.mhb.continuation import ContinuationSettings, continue_branch
 from analysis.mhb.sweep import solve_steps
 from analysis.model import load_model
@@ -256,13 +257,15 @@ def cmd_demo(args) -> dict:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    # The commands are listed once, by argparse from each command's help (the module
+    # docstring's table is for readers of the code, not for --help).
     p = argparse.ArgumentParser(
         prog="python -m analysis",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Command line of the analysis side: python -m analysis COMMAND ...",
+        epilog="Every command has --help.",
     )
-    p.add_argument("-v", "--verbose", action="store_true", help="log progress")
-    sub = p.add_subparsers(dest="command", required=True)
+    add_debug_option(p)
+    sub = p.add_subparsers(dest="command", required=True, title="commands", metavar="COMMAND")
 
     def common(sp, model=True):
         if model:
@@ -332,12 +335,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    logging.basicConfig(
-        level=logging.INFO if args.verbose else logging.WARNING,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
+    configure_logging(args)
+    note_inputs(args)
     try:
-        result = args.func(args)
+        # the command is one stage; the diagnosis and planning commands name their own inside
+        with summarise_repeats(args.command):
+            result = args.func(args)
     except (ValueError, OSError, RuntimeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -29,7 +29,14 @@ from analysis.system import (
     build_problem_dofs,
 )
 
-__all__ = ["Prediction", "SteppedSinePredictor", "needed_rows", "sweeps_of"]
+__all__ = [
+    "Prediction",
+    "SteppedSinePredictor",
+    "ZeroStandardError",
+    "check_standard_errors",
+    "needed_rows",
+    "sweeps_of",
+]
 
 _POWER = {"displacement": 0, "velocity": 1, "acceleration": 2}
 
@@ -289,3 +296,63 @@ class SteppedSinePredictor:
                     for name in params:
                         out.d_frf[name][row] = sens[name].d_outputs(k_frf).T * factor
         return out
+
+
+class ZeroStandardError(ValueError):
+    """A measured FRF that a weighted comparison needs has a standard error of zero."""
+
+
+def check_standard_errors(
+    data: SteppedSineData,
+    channel_names: Sequence[str],
+    H: np.ndarray,
+    std: np.ndarray,
+    rows: np.ndarray | None = None,
+    remedy: str = "",
+) -> None:
+    """Refuse measured FRFs with a standard error of zero (naming the file and the channels).
+
+    The measurement-file contract allows a standard error of 0 (a value known exactly, e.g. a
+    synthetic file written without noise). A residual divided by it is infinite, so the
+    analysis used to put a floor under it (the smallest positive standard error of the file,
+    or 1.0 in FRF units when none was positive) without a word: the chi-square, the verdicts
+    and the calibrated values then depended on that arbitrary floor. Falling back to identity
+    weighting silently would change them as well (chi-square no longer in units of the noise).
+    So a weighted comparison refuses such a file with this error, and the user chooses: fix
+    the file's uncertainties, or ask for the unweighted metric where there is one
+    (``calibrate --identity``, the paper's ``W = I``), which the ``remedy`` text names.
+
+    Parameters
+    ----------
+    data : SteppedSineData
+        The file (its path is named).
+    channel_names : sequence of str
+        Names of the channels of ``H``'s second axis.
+    H, std : ndarray, shape (n_steps, n_channels, n_orders)
+        Measured FRFs and their standard errors; only finite FRFs are checked.
+    rows : ndarray of bool, shape (n_steps,), optional
+        The steps that enter (default: all).
+    remedy : str
+        What the user can do, appended to the message.
+
+    Raises
+    ------
+    ZeroStandardError
+        If a checked FRF has a standard error of zero.
+    """
+    bad = np.isfinite(H) & (np.asarray(std) == 0)
+    if rows is not None:
+        bad &= np.asarray(rows, bool)[:, None, None]
+    if not bad.any():
+        return
+    per_channel = bad.sum(axis=(0, 2))
+    where = ", ".join(
+        f"{name} ({int(k)} value{'s' if k != 1 else ''})"
+        for name, k in zip(channel_names, per_channel, strict=True)
+        if k
+    )
+    raise ZeroStandardError(
+        f"{data.path}: standard errors of zero in channel(s) {where}: a zero standard error "
+        "claims an exact value, so the residuals cannot be weighted by it"
+        + (f"; {remedy}" if remedy else "")
+    )

@@ -84,6 +84,9 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         self.compared = excited if excited.size else np.arange(len(self.orders))
         self.compared_orders = [self.orders[k] for k in self.compared]
         H, s = self.measured()
+        # a floor for choosing between branches at one step only (a relative comparison);
+        # a comparison or a calibration weighted by these errors refuses zeros first
+        # (analysis.predict.check_standard_errors)
         positive = s[np.isfinite(s) & (s > 0)]
         floor = positive.min() if positive.size else 1.0
         self._H = H

@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import re
 import sys
 
 from rig.backends import available_backends, open_backend
@@ -104,11 +105,15 @@ def cmd_amplifier(args) -> dict:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    # The commands are listed once, by argparse from each command's help; the module
+    # docstring's own table stays out of --help (it listed every command a second time).
     p = argparse.ArgumentParser(
-        prog="rig", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog="rig",
+        description="Command line of the acquisition side: rig COMMAND ...",
+        epilog="Every command has --help.",
     )
     p.add_argument("-v", "--verbose", action="store_true", help="log progress")
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, title="commands", metavar="COMMAND")
 
     sp = sub.add_parser("backends", help="list DAQ backends and check them")
     sp.add_argument("--device", default="Dev1", help="NI device name (default Dev1)")
@@ -233,6 +238,20 @@ def cmd_gui(args) -> int:
     )
 
 
+def file_exists_message(exc: FileExistsError) -> str:
+    """An existing output file in the words of the command line: ``--overwrite`` replaces it.
+
+    The library names its argument (``overwrite=True``); every ``rig`` command that writes a
+    file offers ``--overwrite``.
+    """
+    from analysis.measurement_file import OutputExistsError
+
+    if isinstance(exc, OutputExistsError):
+        return exc.rephrased("--overwrite")
+    # rig.runner and rig.export_uff raise a plain FileExistsError with the library's wording
+    return re.sub(r"(pass|use) (--)?overwrite(=True)?\b", "pass --overwrite", str(exc))
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(
@@ -244,6 +263,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except FileExistsError as exc:
+        print(f"error: {file_exists_message(exc)}", file=sys.stderr)
+        return EXIT_USAGE
     except (OSError, ValueError, RuntimeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE

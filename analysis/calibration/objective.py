@@ -4,7 +4,9 @@
 between analytical and measured multi-harmonic FRFs of the selected steps, channels and orders.
 By default ``W`` comes from the file's phasor uncertainties (each real and imaginary part divided
 by its standard error, ``sigma / sqrt(2)`` of the complex one, so ``delta`` is a chi-square);
-``weighting="identity"`` is the paper's ``W = I``.
+``weighting="identity"`` is the paper's ``W = I``. A selected FRF with a standard error of
+zero is refused under uncertainty weighting (:func:`~analysis.predict.check_standard_errors`
+says why), never floored nor silently unweighted.
 """
 
 from __future__ import annotations
@@ -14,7 +16,8 @@ import logging
 import numpy as np
 
 from analysis.calibration.parameters import ParameterSpace
-from analysis.predict import SteppedSinePredictor
+from analysis.measurement_file import require_steps
+from analysis.predict import SteppedSinePredictor, check_standard_errors
 
 __all__ = ["FRFObjective"]
 
@@ -43,20 +46,33 @@ class FRFObjective:
         if weighting not in ("uncertainty", "identity"):
             raise ValueError(f"weighting: expected 'uncertainty' or 'identity', got {weighting!r}")
         self.predictor, self.space = predictor, space
+        data = getattr(predictor, "data", None)
+        if data is not None and getattr(data, "n_steps", 1) == 0:
+            require_steps(data)  # names the file and why its run ended
         H, std = predictor.measured()
         n, C, _ = H.shape
         m = np.ones((n, C), bool) if mask is None else np.asarray(mask, bool)
         if m.shape != (n, C):
             raise ValueError(f"mask: expected shape {(n, C)}, got {m.shape}")
+        selected = int(m.any(axis=1).sum())
         m = m & np.all(np.isfinite(H), axis=2)
         if not m.any():
-            raise ValueError("the selection contains no measured FRF")
+            where = f"{data.path}: " if data is not None and hasattr(data, "path") else ""
+            raise ValueError(
+                f"{where}the selection contains no measured FRF ({selected} of {n} steps "
+                "selected, none with a finite FRF)"
+            )
         self.mask = m
         self.rows = np.flatnonzero(m.any(axis=1))
         self.H = H
-        if weighting == "uncertainty" and np.nanmax(std) == 0:
-            log.warning("the file has no phasor uncertainties: using identity weighting")
-            weighting = "identity"
+        if weighting == "uncertainty" and data is not None:
+            # refused, not floored nor silently unweighted (see check_standard_errors)
+            check_standard_errors(
+                data, list(getattr(predictor, "channel_names", [])) or [str(c) for c in range(C)],
+                np.where(m[:, :, None], H, np.nan), std,
+                remedy="calibrate with --identity (W = I, the paper's metric) to fit without "
+                "them, or give the file its standard errors",
+            )  # fmt: skip
         if weighting == "identity":
             self.sigma = np.ones_like(std)
             self._weight = np.ones_like(std)

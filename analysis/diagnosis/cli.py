@@ -19,33 +19,49 @@ from pathlib import Path
 
 from analysis.diagnosis.augment import augment
 from analysis.diagnosis.candidates import default_candidates
-from analysis.diagnosis.compare import compare
+from analysis.diagnosis.compare import compare, uncalibrated_note
 from analysis.diagnosis.diagnose import diagnose
 from analysis.diagnosis.result import DiagnosisSettings
-from analysis.measurement_file import SteppedSineData, read_measurement
+from analysis.logs import add_debug_option, configure_logging, note_inputs, summarise_repeats
+from analysis.measurement_file import SteppedSineData, read_measurement, require_steps
 from analysis.model import load_model
 from analysis.predict_branches import BranchMatchedPredictor
 
 __all__ = ["add_parsers"]
 
 
+def _value(v) -> str:
+    """A progress value as text: numbers short, a mapping as ``name=value`` pairs."""
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k}={_value(x)}" for k, x in v.items()) + "}"
+    return str(v)
+
+
 def _progress(quiet: bool):
+    """The progress printer of the diagnosis commands: ``show(stage, info)`` to stderr.
+
+    Every event kind the diagnosis, the screen, the refit and the augmentation emit is printed:
+    the per-candidate ``"screen"``/``"refine"`` and per-start ``"start"`` counters (every 25th
+    and the last), ``"lm"`` iterations, and any other event (including a ``"screen"`` event
+    without a counter, as the augmentation sends with the screen's values) as its fields.
+    """
     t0 = time.perf_counter()
 
     def show(stage: str, info: dict) -> None:
         if quiet:
             return
         t = time.perf_counter() - t0
-        if stage in ("screen", "refine"):
+        if stage in ("screen", "refine", "start") and "index" in info and "n" in info:
             if info["index"] + 1 == info["n"] or info["index"] % 25 == 0:
                 print(f"[{t:6.1f} s] {stage} {info['index'] + 1}/{info['n']}", file=sys.stderr)
             return
-        if stage == "lm":
+        if stage == "lm" and "iteration" in info and "cost" in info:
             print(f"[{t:6.1f} s] LM iteration {info['iteration']}: metric {info['cost']:.6g}",
                   file=sys.stderr)  # fmt: skip
             return
-        text = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
-                         for k, v in info.items() if not isinstance(v, dict | list))  # fmt: skip
+        text = ", ".join(f"{k} {_value(v)}" for k, v in info.items() if not isinstance(v, list))
         print(f"[{t:6.1f} s] {stage}: {text}", file=sys.stderr)
 
     return show
@@ -55,7 +71,7 @@ def _stepped(path: str) -> SteppedSineData:
     data = read_measurement(path)
     if not isinstance(data, SteppedSineData):
         raise ValueError(f"{path}: a stepped-sine run is needed (this is a random run)")
-    return data
+    return require_steps(data)
 
 
 def _model(args):
@@ -67,11 +83,19 @@ def _model(args):
     return model.with_values(values) if values else model
 
 
+def _note_uncalibrated(model) -> None:
+    """Say on stderr when the model has not been calibrated (a diagnosis would find that)."""
+    note = uncalibrated_note(model)
+    if note:
+        print(f"note: {note}", file=sys.stderr)
+
+
 def cmd_compare(args) -> dict:
     """Residual blocks of a model against a file; figures with ``--figures``."""
     model, data = _model(args), _stepped(args.run)
     pred = BranchMatchedPredictor(model, data, n_harmonics=args.harmonics, n_time=args.samples)
-    cmp = compare(model, data, predictor=pred, sigma=args.sigma)
+    with summarise_repeats("compare"):
+        cmp = compare(model, data, predictor=pred, sigma=args.sigma)
     if args.figures:
         from analysis.report.diagnosis_figures import (
             plot_frequency_level_map,
@@ -98,8 +122,10 @@ def _settings(args) -> DiagnosisSettings:
 def cmd_diagnose(args) -> dict:
     """Which effect is missing."""
     model, data = _model(args), _stepped(args.run)
-    result = diagnose(model, data, linear_run=args.linear_run, settings=_settings(args),
-                      progress=_progress(args.json))  # fmt: skip
+    _note_uncalibrated(model)
+    with summarise_repeats("diagnose"):
+        result = diagnose(model, data, linear_run=args.linear_run, settings=_settings(args),
+                          progress=_progress(args.json))  # fmt: skip
     if args.figures:
         from analysis.report.diagnosis_figures import plot_diagnosis
 
@@ -113,6 +139,7 @@ def cmd_diagnose(args) -> dict:
 def cmd_augment(args) -> dict:
     """Add the chosen effect (or the best of a diagnosis), recalibrate, compare."""
     model, data = _model(args), _stepped(args.run)
+    _note_uncalibrated(model)
     show = _progress(args.json)
     values = known = None
     if args.candidate:
@@ -122,8 +149,9 @@ def cmd_augment(args) -> dict:
             raise ValueError(f"no candidate {args.candidate!r} (e.g. {labels}; ...)")
         cand = matches[0]
     else:
-        diag = diagnose(model, data, linear_run=args.linear_run, settings=_settings(args),
-                        progress=show)  # fmt: skip
+        with summarise_repeats("diagnose"):
+            diag = diagnose(model, data, linear_run=args.linear_run, settings=_settings(args),
+                            progress=show)  # fmt: skip
         if diag.verdict != "explained":
             raise RuntimeError(
                 f"the diagnosis claims nothing to add (verdict: {diag.verdict}); name a "
@@ -133,9 +161,11 @@ def cmd_augment(args) -> dict:
         cand = best.candidate
         values, known = best.start_values()
         show("chosen", {"candidate": cand.label})
-    result = augment(model, data, cand, values=values, known=known, linear_run=args.linear_run,
-                     n_starts=args.starts, reweight_passes=args.reweight, out=args.out,
-                     progress=show, n_harmonics=args.harmonics, n_time=args.samples)  # fmt: skip
+    with summarise_repeats("augment"):
+        result = augment(model, data, cand, values=values, known=known,
+                         linear_run=args.linear_run, n_starts=args.starts,
+                         reweight_passes=args.reweight, out=args.out, progress=show,
+                         n_harmonics=args.harmonics, n_time=args.samples)  # fmt: skip
     if args.figures:
         from analysis.report.diagnosis_figures import plot_before_after, plot_error_history
 
@@ -207,14 +237,13 @@ def add_parsers(subparsers) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Stand-alone entry: ``python -m analysis.diagnosis.cli diagnose ...``."""
     import json
-    import logging
 
     parser = argparse.ArgumentParser(prog="python -m analysis.diagnosis.cli")
-    parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
+    add_debug_option(parser)
     add_parsers(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")  # fmt: skip
+    configure_logging(args)
+    note_inputs(args)
     try:
         result = args.func(args)
     except (ValueError, OSError, RuntimeError) as exc:

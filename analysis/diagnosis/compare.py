@@ -18,12 +18,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from analysis.measurement_file import SteppedSineData
+from analysis.measurement_file import SteppedSineData, require_steps
 from analysis.model import Model
-from analysis.predict import SteppedSinePredictor
+from analysis.predict import SteppedSinePredictor, check_standard_errors
 from analysis.predict_branches import BranchMatchedPredictor
 
-__all__ = ["Block", "Comparison", "compare"]
+__all__ = ["Block", "Comparison", "compare", "uncalibrated_note"]
 
 
 @dataclass(frozen=True)
@@ -73,6 +73,7 @@ class Comparison:
     predicted: np.ndarray
     alpha: float
     left_out: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    notes: list[str] = field(default_factory=list)
 
     @property
     def chi2_per_dof(self) -> float:
@@ -116,6 +117,7 @@ class Comparison:
         else:
             lines.append(f"{len(fails)} of {len(self.blocks)} blocks fail; the worst:")
             lines += ["  " + b.verdict for b in fails[:n]]
+        lines += [f"note: {t}" for t in self.notes]
         return "\n".join(lines)
 
     def to_json(self) -> dict:
@@ -125,13 +127,37 @@ class Comparison:
             "adequate": self.adequate,
             "alpha": self.alpha,
             "left_out_steps": self.left_out.tolist(),
+            "notes": list(self.notes),
             "blocks": [{**b.__dict__, "verdict": b.verdict} for b in self.blocks],
         }
+
+
+def uncalibrated_note(model: Model) -> str | None:
+    """A note when every parameter the model calibrates is still at its nominal value.
+
+    Such a model (the shipped reference rig, or a new model file) has not been calibrated, so a
+    misfit of tens of times the noise says that, not that the model misses an effect. None when
+    the model has been calibrated (some calibrated parameter left its nominal value) or
+    calibrates nothing.
+    """
+    params = [p for p in model.parameters.values() if p.calibrate]
+    if not params or any(not np.isclose(p.value, p.nominal, rtol=1e-9, atol=0.0) for p in params):
+        return None
+    names = ", ".join(p.name for p in params)
+    return (
+        f"the model's calibrated parameters ({names}) are all at their nominal values: it has "
+        "not been calibrated yet, and the misfit says so. Calibrate it first: "
+        "'python -m analysis calibrate-linear RANDOM.h5 --model MODEL --out LIN' (the linear "
+        "part, from a random test), then 'python -m analysis calibrate RUN.h5 --model "
+        "LIN/calibrated_model.toml --out CAL', and compare CAL/calibrated_model.toml"
+    )
 
 
 def default_bands(frequency_hz: np.ndarray, n_bands: int = 3) -> list[tuple[float, float]]:
     """Bands with equal numbers of steps (resonance regions are sampled densely)."""
     f = np.sort(np.unique(frequency_hz))
+    if f.size == 0:
+        raise ValueError("no frequencies to divide into bands (no steps)")
     edges = np.quantile(f, np.linspace(0, 1, n_bands + 1))
     return [(float(edges[i]), float(edges[i + 1])) for i in range(n_bands)]
 
@@ -176,10 +202,16 @@ def compare(
         Also score the steps the file flags as not converged under force control (by default
         they are left out: their residuals are NaN and :attr:`Comparison.left_out` lists them).
     """
+    require_steps(data)
     pred = predictor or BranchMatchedPredictor(model, data, channels=channels)
     H, s = pred.measured()
+    scored = np.ones(data.n_steps, bool) if include_unconverged else data.control_converged
+    check_standard_errors(
+        data, pred.channel_names, H, s, rows=scored,
+        remedy="the file's standard errors are needed to score a model in units of the noise",
+    )  # fmt: skip
     positive = s[np.isfinite(s) & (s > 0)]
-    floor = positive.min() if positive.size else 1.0
+    floor = positive.min() if positive.size else 1.0  # only NaN errors (unscored) left to fill
     if isinstance(pred, BranchMatchedPredictor) and sigma == "model":
         # the force's error propagated through the model (see response_sigma)
         p, s = pred.predict_with_sigma()
@@ -226,4 +258,5 @@ def compare(
         p.frf,
         alpha,
         np.flatnonzero(left_out),
+        [t for t in [uncalibrated_note(model)] if t],
     )

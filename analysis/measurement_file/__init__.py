@@ -47,6 +47,7 @@ Examples
 """
 
 from .data import RandomData, RawRecord, RunData, SteppedSineData
+from .layout import OutputExistsError
 from .random_writer import write_random
 from .reader import read_measurement, read_raw
 from .records import Actuator, ChannelInfo, RandomFRF, StepRecord
@@ -64,6 +65,7 @@ from .schema import (
     MeasurementFileError,
     safe_std,
 )
+from .status import incomplete_note, input_notes, planned_steps, require_steps, status_text
 from .writer import SteppedSineWriter, create_stepped_sine, open_for_resume
 
 __all__ = [
@@ -80,6 +82,7 @@ __all__ = [
     "ChannelInfo",
     "FieldValueError",
     "MeasurementFileError",
+    "OutputExistsError",
     "RandomData",
     "RandomFRF",
     "RawRecord",
@@ -88,9 +91,14 @@ __all__ = [
     "SteppedSineData",
     "SteppedSineWriter",
     "create_stepped_sine",
+    "incomplete_note",
+    "input_notes",
     "open_for_resume",
+    "planned_steps",
     "read_measurement",
     "read_raw",
+    "require_steps",
     "safe_std",
+    "status_text",
     "write_random",
 ]

@@ -23,7 +23,7 @@ import numpy as np
 from .records import Actuator, ChannelInfo
 from .schema import CHANNEL_FIELDS, FORMAT, FORMAT_VERSION, channel_table_dtype
 
-__all__ = ["build_file", "software_versions", "write_header"]
+__all__ = ["OutputExistsError", "build_file", "software_versions", "write_header"]
 
 log = logging.getLogger(__name__)
 
@@ -96,16 +96,38 @@ def write_header(
     act.attrs["static_stiffness_n_per_m"] = np.float64(actuator.static_stiffness_n_per_m)
 
 
+class OutputExistsError(FileExistsError):
+    """An output file exists and the caller did not ask to replace it.
+
+    The message names the library's argument (``overwrite=True``); a front end that offers the
+    choice under another name (a command line's ``--overwrite``, a GUI's tick box) says it in
+    its own words with :meth:`rephrased`, so each user reads the switch that they can use.
+
+    Attributes
+    ----------
+    path : Path
+        The existing file.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], option: str = "overwrite=True") -> None:
+        self.path = Path(path)
+        super().__init__(self.rephrased(option))
+
+    def rephrased(self, option: str) -> str:
+        """The message with ``option`` (e.g. ``"--overwrite"``) as the way to replace the file."""
+        return f"{self.path}: file exists (pass {option} to replace it)"
+
+
 def build_file(path: Path, overwrite: bool, fill: Callable[[h5py.File], None]) -> None:
     """Create ``path`` atomically: ``fill`` an HDF5 file under a temporary name, then rename it.
 
     Raises
     ------
-    FileExistsError
-        If ``path`` exists and ``overwrite`` is false.
+    OutputExistsError
+        If ``path`` exists and ``overwrite`` is false (a :class:`FileExistsError`).
     """
     if path.exists() and not overwrite:
-        raise FileExistsError(f"{path}: file exists (pass overwrite=True to replace it)")
+        raise OutputExistsError(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.partial")
     try:
         with h5py.File(tmp, "w") as f:

@@ -12,6 +12,7 @@ import json
 import logging
 import sys
 
+from analysis.logs import add_debug_option, configure_logging, summarise_repeats
 from analysis.model import load_model
 from analysis.planning.candidates import (
     Candidates,
@@ -87,7 +88,7 @@ def cmd_plan(args: argparse.Namespace) -> dict:
     noise = NoiseModel(relative=args.noise_relative, floor=args.noise_floor)
     settings = PlanSettings(top=args.top, refine_band_hz=None if args.no_refine else (24.0, 28.0))
     chosen = _choice(args.choose, cand) if args.choose else None
-    with open_executor(args.workers, args.scheduler) as executor:
+    with summarise_repeats("plan"), open_executor(args.workers, args.scheduler) as executor:
         result = plan_tests(model, cand, noise, settings, executor=executor, chosen=chosen)
     if not args.json:
         print(result.format_table())
@@ -138,13 +139,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Stand-alone entry: ``python -m analysis.planning.cli plan ...``."""
     parser = argparse.ArgumentParser(prog="python -m analysis.planning.cli")
-    parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
+    add_debug_option(parser)
     add_parser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=logging.INFO if args.verbose else logging.WARNING,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
+    configure_logging(args)
     try:
         result = args.func(args)
     except (ValueError, OSError) as exc:

@@ -87,6 +87,6 @@ def bearer_token(header: str | None) -> str | None:
 
 def token_matches(given: str | None, expected: str) -> bool:
     """Constant-time comparison of a presented token with the service's."""
-    if given is None:
+    if given is None or not given.isascii():  # a token is ASCII; undecodable bytes are not
         return False
-    return hmac.compare_digest(given.encode("utf-8"), expected.encode("utf-8"))
+    return hmac.compare_digest(given.encode("ascii"), expected.encode("utf-8"))

@@ -41,14 +41,30 @@ from rig.service.hub import EventHub
 from rig.service.state import ACTIVE_STATES, FINAL_STATES, RunRecord, RunState, ServiceState
 from rig.service.worker import STOP_REASON, RigOptions, RigOwner
 
-__all__ = ["HEARTBEAT_S", "ServiceOptions", "make_app", "serve"]
+__all__ = [
+    "HEARTBEAT_S",
+    "MAX_PLAN_STEPS",
+    "ServiceOptions",
+    "make_app",
+    "plan_step_count",
+    "serve",
+]
 
 logger = logging.getLogger(__name__)
 
 API = "/api/v1"
 HEARTBEAT_S = 2.0
 _BATCH = 256  # event lines per write to a stream
-_OUT_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,119}$")
+# matched with fullmatch: "$" would also match before a final newline ("ok\n")
+_OUT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,119}")
+
+#: The most steps a submitted plan may have (every level, sweep and frequency). The paper's
+#: plan has 224; at about a second per step at the least, 100 000 steps are more than a day of
+#: testing, so a plan beyond it is a mistake (a step of 1e-9 Hz), and expanding it would take
+#: the service's memory (38 billion steps, 142 GiB) before anything could refuse it. Checked
+#: from the plan's ranges, before its steps are listed. The plan layer (rig.plans) should own
+#: this limit later, for 'rig run' too.
+MAX_PLAN_STEPS = 100_000
 _SUBMIT_KEYS = {"plan", "out", "label", "pause_on_fault"}
 
 
@@ -177,7 +193,20 @@ SERVICE: web.AppKey[Service] = web.AppKey("service", Service)
 async def _guard(request: web.Request, handler) -> web.StreamResponse:
     """Token first, then the handler; every failure becomes a JSON error."""
     service = request.app[SERVICE]
-    given = bearer_token(request.headers.get("Authorization"))
+    header = request.headers.get("Authorization")
+    if header is not None and not header.isascii():
+        # bytes that are not UTF-8 arrive as surrogates; a token is ASCII in any case
+        logger.warning(
+            "refused %s %s from %s: Authorization header not ASCII",
+            request.method, request.path, request.remote,
+        )  # fmt: skip
+        return _error(
+            400,
+            "bad-token",
+            "the Authorization header is not ASCII text: send 'Authorization: Bearer <token>' "
+            "with the token exactly as in the service directory's 'token' file",
+        )
+    given = bearer_token(header)
     if given is None:
         logger.warning(
             "refused %s %s from %s: no token", request.method, request.path, request.remote
@@ -212,6 +241,10 @@ async def _body(request: web.Request) -> dict[str, Any]:
         data = await request.json()
     except (ValueError, UnicodeDecodeError) as exc:
         raise ApiError(400, "bad-json", f"the body is not valid JSON: {exc}") from None
+    except RecursionError:
+        raise ApiError(
+            400, "bad-json", "the body is nested too deeply (a plan is a few levels deep)"
+        ) from None
     if data is None:
         return {}
     if not isinstance(data, dict):
@@ -262,12 +295,38 @@ def _plan(spec: Any) -> Any:
     raise ApiError(400, "bad-plan", "'plan' must be a built-in plan's name or a plan table")
 
 
+def plan_step_count(plan: Any) -> int:
+    """Steps of ``plan`` counted from its settings, without listing them.
+
+    A stepped-sine plan: levels x sweeps x frequencies, each range's frequencies counted
+    (a frequency shared by two ranges twice: an upper bound of the plan's steps, exact for
+    ranges that do not overlap); a random plan: its records.
+    """
+    if plan.kind != "stepped-sine":
+        return int(plan.n_steps)
+    fr = plan.frequencies
+    per_level = sum(round((r.stop_hz - r.start_hz) / r.step_hz) + 1 for r in fr.ranges)
+    sweeps = 2 if "-" in fr.direction else 1
+    return len(plan.excitation.levels_n) * sweeps * per_level
+
+
+def _check_size(plan: Any) -> None:
+    n = plan_step_count(plan)
+    if n > MAX_PLAN_STEPS:
+        raise ApiError(
+            400,
+            "plan-too-large",
+            f"plan {plan.name!r} has {n:,} steps, more than the service's maximum of "
+            f"{MAX_PLAN_STEPS:,} (levels x sweeps x frequencies): check its step_hz",
+        )
+
+
 def _out_path(service: Service, out: Any, run_id: str, plan_name: str) -> Path:
     if out is None:
         safe = re.sub(r"[^A-Za-z0-9._-]+", "_", plan_name).strip("._") or "run"
         name = f"{run_id}-{safe}.h5"
     else:
-        if not isinstance(out, str) or not _OUT_NAME.match(out):
+        if not isinstance(out, str) or not _OUT_NAME.fullmatch(out):
             raise ApiError(
                 400,
                 "bad-out",
@@ -296,6 +355,7 @@ async def submit_run(request: web.Request) -> web.Response:
     if not isinstance(label, str) or not isinstance(pause_on_fault, bool):
         raise ApiError(400, "bad-field", "'label' must be a string, 'pause_on_fault' a boolean")
     plan = _plan(body["plan"])
+    _check_size(plan)
     try:
         service.setup.channels_for_points(plan.points)
     except ValueError as exc:

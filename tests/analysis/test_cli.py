@@ -49,3 +49,16 @@ def test_continuation_finds_folds_and_unstable_points(tmp_path):
     out = json.loads(r.stdout.strip().splitlines()[-1])
     assert len(out["folds_hz"]) == 2 and out["unstable_points"] > 0
     assert (tmp_path / "branch.png").exists()
+
+
+def test_top_level_help_lists_each_command_once():
+    """``python -m analysis --help`` names every command on one line of its own, once."""
+    from analysis.cli import build_parser
+
+    text = build_parser().format_help()
+    names = list(build_parser()._subparsers._group_actions[0].choices)
+    assert {"compare", "calibrate", "plan", "augment"} <= set(names)
+    for name in names:
+        lines = [ln for ln in text.splitlines() if ln.split()[:1] == [name]]
+        assert len(lines) == 1, (name, lines)
+    assert "{" not in text

@@ -158,3 +158,44 @@ def test_run_linear_and_export(files, tmp_path):
         assert json.loads(r.stdout)["sets"] == n
     r = _rig("export-uff", out, tmp_path / "run.uff")
     assert r.returncode == 2 and "file exists" in r.stderr
+
+
+def test_top_level_help_lists_each_command_once():
+    """``rig --help`` names every command on one line of its own, once."""
+    from rig.cli import build_parser
+
+    text = build_parser().format_help()
+    names = list(build_parser()._subparsers._group_actions[0].choices)
+    assert len(names) > 10
+    for name in names:
+        lines = [ln for ln in text.splitlines() if ln.split()[:1] == [name]]
+        assert len(lines) == 1, (name, lines)
+    assert "{" not in text  # no {a,b,...} list of every command in the usage
+
+
+def test_an_existing_output_file_names_the_command_line_flag(tmp_path):
+    """The library says overwrite=True; a command-line user reads --overwrite."""
+    for command in ("run", "linear"):
+        out = tmp_path / f"{command}.h5"
+        out.write_bytes(b"")
+        plan = ["quick"] if command == "run" else []
+        r = _rig(command, *plan, "--backend", "sim", "--out", out, "--lock-dir", tmp_path)
+        assert r.returncode == 2, r.stderr
+        assert f"{out}: file exists (pass --overwrite to replace it)" in r.stderr
+        assert "overwrite=True" not in r.stderr and "Traceback" not in r.stderr
+
+
+def test_the_library_keeps_its_own_wording_and_the_cli_rephrases_each_kind(tmp_path):
+    from analysis.measurement_file import OutputExistsError
+    from analysis.measurement_file.layout import build_file
+    from rig.cli import file_exists_message
+
+    out = tmp_path / "x.h5"
+    out.write_bytes(b"")
+    with pytest.raises(OutputExistsError, match=r"pass overwrite=True") as info:
+        build_file(out, False, lambda f: None)
+    assert isinstance(info.value, FileExistsError) and info.value.path == out
+    assert file_exists_message(info.value) == f"{out}: file exists (pass --overwrite to replace it)"
+    for text in ("pass overwrite to replace it", "use --overwrite to replace it"):
+        msg = file_exists_message(FileExistsError(f"{out}: file exists ({text})"))
+        assert msg == f"{out}: file exists (pass --overwrite to replace it)"

@@ -95,3 +95,28 @@ def test_compare_scores_with_the_standard_errors_through_the_model(runs, referen
     by_file = compare(reference_model, data, predictor=pred, sigma="file")
     assert np.allclose(by_file.residual[ok], ((p.frf - H) / file_sigma)[ok], rtol=1e-9)
     assert not np.allclose(by_default.residual[ok], by_file.residual[ok], rtol=1e-3)
+
+
+def test_an_uncalibrated_model_is_named_as_such(runs, reference_model, capsys) -> None:
+    """The shipped model, every calibrated parameter at its nominal value, is not calibrated."""
+    import argparse
+
+    from analysis.diagnosis.cli import add_parsers
+    from analysis.diagnosis.compare import uncalibrated_note
+    from analysis.model import load_model
+
+    shipped = load_model()
+    note = uncalibrated_note(shipped)
+    assert note and "not been calibrated yet" in note
+    assert "calibrate-linear" in note and "python -m analysis calibrate " in note
+    assert uncalibrated_note(reference_model) is None  # a calibrated one: no note
+    name = shipped.parameter_names(calibrate=True)[0]
+    nudged = shipped.with_values({name: shipped.parameters[name].nominal * 1.01})
+    assert uncalibrated_note(nudged) is None
+    parser = argparse.ArgumentParser()
+    add_parsers(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(["compare", str(runs("reference").path)])
+    out = args.func(args)
+    assert out["notes"] == [note]
+    assert f"note: {note}" in capsys.readouterr().out
+    assert compare(reference_model, runs("reference")).notes == []
