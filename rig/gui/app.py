@@ -17,7 +17,7 @@ from PySide6 import QtGui, QtWidgets
 
 from rig.gui.acquisition import AcquisitionPanel
 from rig.gui.controller import LocalRunController, RunController, RunEnd
-from rig.gui.qt_check import binding_problem
+from rig.gui.qt_check import binding_problem, display_problem
 from rig.gui.run_browser import RunBrowser
 from rig.gui.style import configure_app
 from rig.gui.workbench import WorkbenchPanel
@@ -141,9 +141,13 @@ def run_gui(
         Who runs tests (default: this process, or the service).
     """
     problem = binding_problem()
+    app = QtWidgets.QApplication.instance()
+    if app is None:
+        # Qt aborts the process when its platform plugin cannot load: say why before it tries
+        problem = problem or display_problem()
     if problem:
         raise RuntimeError(problem)
-    app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
+    app = app or QtWidgets.QApplication(sys.argv[:1])
     configure_app(app)
     if controller is None and service:
         from rig.gui.service_controller import ServiceRunController
