@@ -1,15 +1,19 @@
-"""A lab user's first hour: the GUI says why it cannot open a window instead of aborting."""
+"""A lab user's first hour: the GUI says why it cannot open a window instead of aborting, and
+each run gets a new file."""
 
 from __future__ import annotations
 
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
+from PySide6 import QtCore
 
 from rig.gui.qt_check import XCB_LIBRARIES, display_problem, missing_xcb_libraries
+from rig.gui.run_setup import fresh_run_path, next_free_path, runs_folder
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -68,6 +72,7 @@ def test_the_library_check_loads_real_libraries():
 def test_rig_gui_without_a_display_exits_with_a_message_not_a_core_dump(tmp_path):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     env.pop("QT_QPA_PLATFORM", None)
+    env["CLEARANCE_RIG_RUNS"] = str(tmp_path / "runs")
     done = subprocess.run(
         [sys.executable, "-m", "rig", "gui"],
         cwd=ROOT,
@@ -80,3 +85,68 @@ def test_rig_gui_without_a_display_exits_with_a_message_not_a_core_dump(tmp_path
     assert "error: no display: DISPLAY and WAYLAND_DISPLAY are unset" in done.stderr
     assert "Could not load the Qt platform plugin" not in done.stderr
     assert not list(tmp_path.iterdir())
+
+
+# -- a new file for every run ----------------------------------------------------------------------
+
+
+def test_the_runs_folder_and_new_file_names(tmp_path, monkeypatch):
+    monkeypatch.delenv("CLEARANCE_RIG_RUNS")
+    assert runs_folder() == Path.home() / "clearance-rig-runs"
+    monkeypatch.setenv("CLEARANCE_RIG_RUNS", str(tmp_path))
+    assert runs_folder() == tmp_path
+    now = time.mktime((2026, 3, 4, 5, 6, 7, 0, 0, -1))
+    first = fresh_run_path(now=now)
+    assert first == tmp_path / "run-20260304-050607.h5"
+    first.touch()
+    assert fresh_run_path(now=now) == tmp_path / "run-20260304-050607-2.h5"
+    assert next_free_path(first, now=now + 60) == tmp_path / "run-20260304-050707.h5"
+    beam = tmp_path / "beam.h5"
+    beam.touch()
+    assert next_free_path(beam) == tmp_path / "beam-2.h5"
+    (tmp_path / "beam-2.h5").touch()
+    assert next_free_path(beam) == tmp_path / "beam-3.h5"
+    assert next_free_path(tmp_path / "beam-2.h5") == tmp_path / "beam-3.h5"
+
+
+def test_the_default_file_is_new_and_an_existing_one_says_what_to_do(
+    qtbot, tmp_path, monkeypatch, _runs_folder
+):
+    from rig.gui.run_setup import RunSetupPanel
+
+    monkeypatch.chdir(tmp_path)
+    panel = RunSetupPanel()
+    qtbot.addWidget(panel)
+    box = panel.run_box
+    path = Path(box.path.text())
+    assert path.parent == _runs_folder and path.name.startswith("run-")
+    assert path.suffix == ".h5" and not path.exists()
+    # the runs folder does not exist yet: it is made when the run starts
+    assert panel.check(), panel.problem
+    assert panel.request().path == path and _runs_folder.is_dir()
+    assert not (tmp_path / "run.h5").exists()
+
+    path.write_bytes(b"a run")  # the run wrote its file
+    panel.after_run(path)
+    new = Path(box.path.text())
+    assert new != path and new.parent == _runs_folder and not new.exists()
+    assert panel.valid and "ready" in panel.status.text()
+
+    box.path.setText(str(path))  # the operator types the old name again
+    assert not panel.check()
+    assert panel.problem.startswith(f"{path.name} exists")
+    assert "press 'New file'" in panel.problem and "'replace an existing file'" in panel.problem
+    assert "New file" in box.path_error.text() and box.path_error.isVisibleTo(box)
+    qtbot.mouseClick(box.new_file, QtCore.Qt.MouseButton.LeftButton)
+    assert Path(box.path.text()) != path and panel.check()
+    assert path.read_bytes() == b"a run"  # never overwritten
+
+    box.path.setText(str(path))
+    box.overwrite.setChecked(True)  # replacing is the operator's choice
+    assert panel.check()
+    panel.after_run(path)
+    assert Path(box.path.text()) == path
+
+    box.overwrite.setChecked(False)
+    box.path.setText(str(tmp_path / "no" / "such" / "folder" / "x.h5"))
+    assert not panel.check() and "does not exist" in panel.problem
