@@ -84,9 +84,9 @@ class LabWindow(QtWidgets.QMainWindow):
         self.tabs.setCurrentWidget(self.acquisition)
 
     def _to_workbench(self, path) -> None:
-        if self.workbench.open_run(path) and self.workbench.model is None:
-            self.workbench.open_model(None)
+        """The browser's "Compare with a model…": the run against the workbench's model."""
         self.tabs.setCurrentWidget(self.workbench)
+        self.workbench.compare_run(path)
 
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:  # noqa: N802 - Qt's name
         if self.acquisition.controller.busy:

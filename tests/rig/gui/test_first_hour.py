@@ -1,5 +1,5 @@
-"""A lab user's first hour: the GUI says why it cannot open a window instead of aborting, and
-each run gets a new file."""
+"""A lab user's first hour: the GUI says why it cannot open a window instead of aborting, each
+run gets a new file, and "Compare with a model…" compares."""
 
 from __future__ import annotations
 
@@ -150,3 +150,29 @@ def test_the_default_file_is_new_and_an_existing_one_says_what_to_do(
     box.overwrite.setChecked(False)
     box.path.setText(str(tmp_path / "no" / "such" / "folder" / "x.h5"))
     assert not panel.check() and "does not exist" in panel.problem
+
+
+# -- "Compare with a model…" compares ------------------------------------------------------------
+
+
+def test_compare_with_a_model_from_the_browser_shows_the_comparison(qtbot, lock_dir, damper_run):
+    from tests.rig.gui.gui_helpers import make_window
+
+    window = make_window(qtbot, lock_dir)
+    browser, bench = window.browser, window.workbench
+    assert browser.open(damper_run) and browser.workbench_button.isEnabled()
+    assert bench.model is None and bench.comparison is None
+    with qtbot.waitSignal(bench.task_finished, timeout=120_000) as blocker:
+        qtbot.mouseClick(browser.workbench_button, QtCore.Qt.MouseButton.LeftButton)
+        assert window.tabs.currentWidget() is bench and bench.busy
+    assert blocker.args == ["compare", True], bench.stage.text()
+    # the run against the reference rig: the FRFs, the residual maps and a sentence
+    assert bench.run_row.path.text() == str(damper_run)
+    assert bench.model_label == "reference rig (nominal)"
+    cmp = bench.comparison
+    assert cmp is not None and cmp.rms_over_noise > 1
+    assert bench.tabs.currentWidget() is bench.frfs
+    assert len(bench.frfs.frf.magnitude[0].getPlotItem().listDataItems()) == 6  # 3 levels x 2
+    assert bench.frfs.note.text() == f"residual {cmp.rms_over_noise:.3g} x noise"
+    assert bench.residuals.map.values.shape == (3, 9)
+    assert "compared with reference rig (nominal): residual" in bench.stage.text()
