@@ -1,5 +1,6 @@
 """A lab user's first hour: the GUI says why it cannot open a window instead of aborting, each
-run gets a new file, and "Compare with a model…" compares."""
+run gets a new file, "Compare with a model…" compares, and the expert settings of the diagnosis
+wait behind "Advanced"."""
 
 from __future__ import annotations
 
@@ -176,3 +177,47 @@ def test_compare_with_a_model_from_the_browser_shows_the_comparison(qtbot, lock_
     assert bench.frfs.note.text() == f"residual {cmp.rms_over_noise:.3g} x noise"
     assert bench.residuals.map.values.shape == (3, 9)
     assert "compared with reference rig (nominal): residual" in bench.stage.text()
+
+
+# -- the expert settings of the diagnosis behind "Advanced" --------------------------------------
+
+
+def test_expert_diagnosis_settings_are_behind_advanced_with_their_defaults(qtbot):
+    from rig.gui.diagnosis_options import ADVANCED, BASIC, GUI_DIAGNOSIS, DiagnosisOptions
+    from rig.gui.settings_fields import format_value
+
+    options = DiagnosisOptions()
+    qtbot.addWidget(options)
+    options.show()
+    form = options.form
+    assert len(ADVANCED) >= 15 and set(ADVANCED).isdisjoint(BASIC)
+    # a first-time user sees the candidates, the starts and the time budget, and no more
+    for widget in (options.locations, options.laws, options.starts):
+        assert widget.isVisible()
+    for name in BASIC:
+        assert form.widget(f"diagnosis.{name}").isVisible()
+    assert options.advanced.toggle.isVisible() and not options.advanced.expanded
+    assert "Advanced (" in options.advanced.toggle.text()
+    for name in ADVANCED:
+        widget = form.widget(f"diagnosis.{name}")
+        assert not widget.isVisible(), name
+        tip = widget.toolTip()
+        default = "1 here" if name == "workers" else format_value(getattr(GUI_DIAGNOSIS, name))
+        assert tip.split("Default: ")[1].startswith(default), (name, tip)
+        assert len(tip.split("Default: ")[0].strip()) > 10, (name, tip)  # what it does
+    assert options.settings() == GUI_DIAGNOSIS
+
+    qtbot.mouseClick(options.advanced.toggle, QtCore.Qt.MouseButton.LeftButton)
+    assert options.advanced.expanded
+    assert all(form.widget(f"diagnosis.{n}").isVisible() for n in ADVANCED)
+    qtbot.mouseClick(options.advanced.toggle, QtCore.Qt.MouseButton.LeftButton)
+    assert not form.widget("diagnosis.n_verify").isVisible()
+
+    # a wrong expert setting opens the section and is shown at its entry
+    form.widget("diagnosis.rescreen_ratio").setText("2")
+    with pytest.raises(ValueError, match="rescreen_ratio"):
+        options.settings()
+    assert options.advanced.expanded
+    assert "must be in [0, 1)" in form.error_text("diagnosis.rescreen_ratio")
+    qtbot.mouseClick(options.restore, QtCore.Qt.MouseButton.LeftButton)
+    assert options.settings() == GUI_DIAGNOSIS
