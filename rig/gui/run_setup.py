@@ -55,6 +55,14 @@ def runs_folder() -> Path:
     return Path(named).expanduser() if named else Path.home() / "clearance-rig-runs"
 
 
+def _short(folder: Path) -> str:
+    """A folder as a person writes it (``~/clearance-rig-runs``)."""
+    try:
+        return str(Path("~") / Path(folder).resolve().relative_to(Path.home().resolve()))
+    except ValueError:
+        return str(folder)
+
+
 def _numbered(folder: Path, stem: str, suffix: str, n: int) -> Path:
     """``folder/stem-n.suffix`` with the first ``n`` not taken."""
     while (folder / f"{stem}-{n}{suffix}").exists():
@@ -299,8 +307,10 @@ class RunSetupPanel(QtWidgets.QTabWidget):
         self.valid = not problem
         self.problem = problem
         if self.valid:
+            into = self.resume_path or Path(self.run_box.path.text().strip()).expanduser()
             self.status.setText(
-                f"<span style='color:{OK}'>ready: {plan.name} on {setup.name}</span>"
+                f"<span style='color:{OK}'>ready: {plan.name} on {setup.name}, into "
+                f"{into.name} in {_short(into.parent)}</span>"
             )
         else:
             self.status.setText(f"<span style='color:{ALARM}'>not ready: {problem}</span>")
