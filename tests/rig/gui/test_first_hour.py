@@ -221,3 +221,35 @@ def test_expert_diagnosis_settings_are_behind_advanced_with_their_defaults(qtbot
     assert "must be in [0, 1)" in form.error_text("diagnosis.rescreen_ratio")
     qtbot.mouseClick(options.restore, QtCore.Qt.MouseButton.LeftButton)
     assert options.settings() == GUI_DIAGNOSIS
+
+
+# -- the FRF grid's axes -----------------------------------------------------------------------
+
+
+def test_frf_grid_axis_titles_have_units_and_fit_in_their_plots(qtbot):
+    from rig.gui.frf_view import FrfPlots
+
+    plots = FrfPlots()
+    qtbot.addWidget(plots)
+    plots.configure(["1", "2", "3"], "(m/s²)/N", "acc7")
+    plots.resize(850, 200)  # shorter than the grid's least height: the plots keep theirs
+    plots.show()
+    qtbot.waitExposed(plots)
+    for mag, ph in zip(plots.magnitude, plots.phase, strict=True):
+        assert ph.getPlotItem().getAxis("bottom").labelText == "fundamental frequency [Hz]"
+        assert not mag.getPlotItem().getAxis("bottom").style["showValues"]  # the phase's axis
+        for plot in (mag, ph):
+            item = plot.getPlotItem()
+            for name in ("left", "bottom"):
+                axis = item.getAxis(name)
+                if not axis.label.isVisible() or not axis.labelText:
+                    continue
+                text = axis.label.toPlainText().strip()
+                assert "[" in text and text.endswith("]"), text  # a unit on every title
+                shown = plot.mapFromScene(axis.label.mapRectToScene(axis.label.boundingRect()))
+                box = shown.boundingRect()
+                inside = plot.viewport().rect().adjusted(-4, -4, 4, 4)  # the text's margins
+                assert inside.contains(box), (text, box, plot.viewport().rect())
+        assert mag.getPlotItem().getAxis("left").width() == ph.getPlotItem().getAxis("left").width()
+    widths = {p.getPlotItem().getAxis("left").width() for p in plots.magnitude + plots.phase}
+    assert len(widths) == 1  # the columns line up
