@@ -203,7 +203,11 @@ def add_gui_command(sub) -> None:
     sp.add_argument("--setup", help="lab setup to preselect (default: the plan's)")
     sp.add_argument("--truth", help="simulated rig: truth structure name or file")
     sp.add_argument("--seed", type=int, help="simulated rig: noise seed")
-    sp.add_argument("--out", help="measurement file of the next run")
+    sp.add_argument(
+        "--out",
+        help="measurement file of the next run (default: a new run-YYYYmmdd-HHMMSS.h5 in "
+        "~/clearance-rig-runs, or in the folder CLEARANCE_RIG_RUNS names)",
+    )
     sp.add_argument("--open", dest="open_file", metavar="FILE", help="show FILE in the browser")
     sp.add_argument("--model", help="model file for the workbench")
     sp.add_argument(

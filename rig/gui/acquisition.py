@@ -180,7 +180,7 @@ class AcquisitionPanel(QtWidgets.QWidget):
         pretest = self.request is not None and self.request.pretest_only
         if pretest and end.status == "success":
             self._alarm("info", "pretest", "pre-test finished")
-        self.setup_panel.check()  # the file exists now: the next run needs another one
+        self.setup_panel.after_run(end.path)  # the next run gets a new file
         self._set_state(end.status)
         self.redraw()
         self._timer.stop()

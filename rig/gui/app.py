@@ -17,7 +17,7 @@ from PySide6 import QtGui, QtWidgets
 
 from rig.gui.acquisition import AcquisitionPanel
 from rig.gui.controller import LocalRunController, RunController, RunEnd
-from rig.gui.qt_check import binding_problem
+from rig.gui.qt_check import binding_problem, display_problem
 from rig.gui.run_browser import RunBrowser
 from rig.gui.style import configure_app
 from rig.gui.workbench import WorkbenchPanel
@@ -84,9 +84,9 @@ class LabWindow(QtWidgets.QMainWindow):
         self.tabs.setCurrentWidget(self.acquisition)
 
     def _to_workbench(self, path) -> None:
-        if self.workbench.open_run(path) and self.workbench.model is None:
-            self.workbench.open_model(None)
+        """The browser's "Compare with a model…": the run against the workbench's model."""
         self.tabs.setCurrentWidget(self.workbench)
+        self.workbench.compare_run(path)
 
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:  # noqa: N802 - Qt's name
         if self.acquisition.controller.busy:
@@ -141,9 +141,13 @@ def run_gui(
         Who runs tests (default: this process, or the service).
     """
     problem = binding_problem()
+    app = QtWidgets.QApplication.instance()
+    if app is None:
+        # Qt aborts the process when its platform plugin cannot load: say why before it tries
+        problem = problem or display_problem()
     if problem:
         raise RuntimeError(problem)
-    app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
+    app = app or QtWidgets.QApplication(sys.argv[:1])
     configure_app(app)
     if controller is None and service:
         from rig.gui.service_controller import ServiceRunController

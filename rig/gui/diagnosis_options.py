@@ -4,23 +4,47 @@ The settings are a form generated from :class:`analysis.diagnosis.DiagnosisSetti
 runs verifications in its own process: ``workers = 1`` unless changed); the candidates are
 :func:`analysis.diagnosis.default_candidates` of the model, optionally kept to some locations
 (``point 5``, ``mounts``, ``joint clamp rz``) and laws (``quadratic_damper``).
+
+A first diagnosis needs none of the expert settings: the candidate filters, the recalibration's
+starts and the time budget are shown; the rest (:data:`ADVANCED`) wait closed under
+*Advanced*, each with what it does and its default in its tooltip.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import re
 
 from PySide6 import QtWidgets
 
 from analysis.diagnosis import DiagnosisSettings, default_candidates
 from rig.gui.forms import SettingsForm
-from rig.gui.settings_fields import dataclass_fields
+from rig.gui.settings_fields import Field, dataclass_fields, format_value
 
-__all__ = ["GUI_DIAGNOSIS", "DiagnosisOptions"]
+__all__ = ["ADVANCED", "BASIC", "GUI_DIAGNOSIS", "DiagnosisOptions"]
 
 #: The GUI's diagnosis defaults: verifications in this process (no process pool forked from a
 #: GUI), otherwise the library's defaults.
 GUI_DIAGNOSIS = DiagnosisSettings(workers=1)
+
+#: Diagnosis settings a first-time user sees; every other one is under *Advanced*.
+BASIC = ("time_budget_s",)
+#: The expert settings, closed under *Advanced* until opened.
+ADVANCED = tuple(f.name for f in dataclasses.fields(DiagnosisSettings) if f.name not in BASIC)
+
+_WHY_DEFAULT = {
+    "workers": "1 here: the GUI verifies in its own process (the library's default, "
+    f"{DiagnosisSettings().workers}, forks worker processes)",
+}
+_SETTING_ERROR = re.compile(r"^DiagnosisSettings\.(\w+): (.*)$", re.S)
+
+
+def _with_default(field: Field) -> Field:
+    """The field with its default (and why it is that) in its tooltip."""
+    name = field.name
+    default = _WHY_DEFAULT.get(name, format_value(getattr(GUI_DIAGNOSIS, name)))
+    text = f"{field.tooltip}\n\nDefault: {default}" if field.tooltip else f"Default: {default}"
+    return dataclasses.replace(field, tooltip=text)
 
 
 def _names(text: str) -> list[str]:
@@ -39,11 +63,28 @@ class DiagnosisOptions(QtWidgets.QWidget):
         self.starts = QtWidgets.QSpinBox()
         self.starts.setRange(0, 200)
         self.starts.setValue(8)
-        self.starts.setToolTip("Latin hypercube starts of the recalibration (besides the screen's)")
-        self.form = SettingsForm(
-            [("Diagnosis settings", dataclass_fields(DiagnosisSettings, "diagnosis"))]
+        self.starts.setToolTip(
+            "Latin hypercube starts of the recalibration (besides the screen's)\n\nDefault: 8"
         )
-        self.form.set_document({"diagnosis": dataclasses.asdict(GUI_DIAGNOSIS)})
+        fields = [_with_default(f) for f in dataclass_fields(DiagnosisSettings, "diagnosis")]
+        self.form = SettingsForm(
+            [
+                ("Diagnosis settings", [f for f in fields if f.name in BASIC]),
+                ("Advanced", [f for f in fields if f.name in ADVANCED]),
+            ],
+            collapsed=("Advanced",),
+        )
+        self.advanced = self.form.collapsible["Advanced"]
+        self.advanced.toggle.setText(f"Advanced ({len(ADVANCED)} expert settings)")
+        self.advanced.toggle.setToolTip(
+            "settings of the screen, the verifications and the verdict; the defaults suit a "
+            "first diagnosis (each entry's tooltip says what it does and its default)"
+        )
+        self.restore = QtWidgets.QPushButton("Restore defaults")
+        self.restore.setToolTip("every diagnosis setting back to its default")
+        self.restore.clicked.connect(self.restore_defaults)
+        self.advanced.body.layout().addRow(self.restore)
+        self.restore_defaults()
         filters = QtWidgets.QGroupBox("Candidates")
         rows = QtWidgets.QFormLayout(filters)
         rows.addRow("locations", self.locations)
@@ -54,15 +95,24 @@ class DiagnosisOptions(QtWidgets.QWidget):
         layout.addWidget(filters)
         layout.addWidget(self.form)
 
+    def restore_defaults(self) -> None:
+        """Every diagnosis setting back to the GUI's default (:data:`GUI_DIAGNOSIS`)."""
+        self.form.set_document({"diagnosis": dataclasses.asdict(GUI_DIAGNOSIS)})
+
     def settings(self) -> DiagnosisSettings:
         """The settings in the form (raises ValueError with the settings' own message, which
-        is also shown above the form)."""
+        is also shown at the entry it names, opening *Advanced* when it is there, or above
+        the form)."""
         self.form.clear_errors()
         values = self.form.document().get("diagnosis", {})
         try:
             return DiagnosisSettings(**values)
         except (TypeError, ValueError) as exc:
-            self.form.show_error("", str(exc))
+            named = _SETTING_ERROR.match(str(exc))
+            if named and named.group(1) in values:
+                self.form.show_error(f"diagnosis.{named.group(1)}", named.group(2))
+            else:
+                self.form.show_error("", str(exc))
             raise ValueError(str(exc)) from None
 
     def candidates(self, model):

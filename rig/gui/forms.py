@@ -26,7 +26,7 @@ from rig.gui.settings_fields import (
 )
 from rig.gui.style import ALARM
 
-__all__ = ["RowsTable", "SettingsForm"]
+__all__ = ["CollapsibleSection", "RowsTable", "SettingsForm"]
 
 
 # ------------------------------------------------------------------------ widgets
@@ -143,6 +143,54 @@ class RowsTable(QtWidgets.QWidget):
                 item.setBackground(brush)
 
 
+class CollapsibleSection(QtWidgets.QWidget):
+    """A titled section whose body opens and closes under an arrow button (closed at first).
+
+    Parameters
+    ----------
+    title : str
+        The button's text (``"Advanced"``).
+    body : QWidget
+        What the section shows when open.
+    """
+
+    def __init__(
+        self, title: str, body: QtWidgets.QWidget, parent: QtWidgets.QWidget | None = None
+    ) -> None:
+        super().__init__(parent)
+        self.body = body
+        self.toggle = QtWidgets.QToolButton()
+        self.toggle.setText(title)
+        self.toggle.setCheckable(True)
+        self.toggle.setChecked(False)
+        self.toggle.setToolButtonStyle(QtCore.Qt.ToolButtonStyle.ToolButtonTextBesideIcon)
+        self.toggle.setArrowType(QtCore.Qt.ArrowType.RightArrow)
+        self.toggle.setAutoRaise(True)
+        font = self.toggle.font()
+        font.setBold(True)
+        self.toggle.setFont(font)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.setSpacing(2)
+        layout.addWidget(self.toggle)
+        layout.addWidget(body)
+        body.setVisible(False)
+        self.toggle.toggled.connect(self._toggled)
+
+    def _toggled(self, open_: bool) -> None:
+        self.toggle.setArrowType(
+            QtCore.Qt.ArrowType.DownArrow if open_ else QtCore.Qt.ArrowType.RightArrow
+        )
+        self.body.setVisible(open_)
+
+    @property
+    def expanded(self) -> bool:
+        return self.toggle.isChecked()
+
+    def set_expanded(self, open_: bool = True) -> None:
+        self.toggle.setChecked(open_)
+
+
 @dataclass
 class _Entry:
     field: Field | None
@@ -151,6 +199,7 @@ class _Entry:
     get: Callable[[], Any]
     set: Callable[[Any], None]
     rows: RowsTable | None = None
+    section: str = ""
 
 
 class SettingsForm(QtWidgets.QWidget):
@@ -161,6 +210,9 @@ class SettingsForm(QtWidgets.QWidget):
     sections : list of (title, list of Field)
         Each section is a group box of labelled entries; an entry's error message appears
         right below it.
+    collapsed : iterable of str
+        Titles of sections shown closed under an arrow button (:class:`CollapsibleSection`)
+        until the operator opens them, or an error in one of their entries is shown.
 
     Signals
     -------
@@ -174,26 +226,35 @@ class SettingsForm(QtWidgets.QWidget):
         self,
         sections: list[tuple[str, list[Field]]],
         parent: QtWidgets.QWidget | None = None,
+        *,
+        collapsed: Iterable[str] = (),
     ) -> None:
         super().__init__(parent)
         self._entries: dict[str, _Entry] = {}
         self._layouts: dict[str, QtWidgets.QFormLayout] = {}
+        self.collapsible: dict[str, CollapsibleSection] = {}
         self.general_error = _error_label()
+        closed = set(collapsed)
         layout = QtWidgets.QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addWidget(self.general_error)
         for title, fields in sections:
-            box = QtWidgets.QGroupBox(title)
+            box = QtWidgets.QGroupBox("" if title in closed else title)
             form = QtWidgets.QFormLayout(box)
             form.setFieldGrowthPolicy(QtWidgets.QFormLayout.FieldGrowthPolicy.ExpandingFieldsGrow)
             self._layouts[title] = form
             for f in fields:
-                self._add_field(form, f)
-            layout.addWidget(box)
+                self._add_field(form, f, title)
+            if title in closed:
+                section = CollapsibleSection(title, box)
+                self.collapsible[title] = section
+                layout.addWidget(section)
+            else:
+                layout.addWidget(box)
         layout.addStretch(1)
 
     # -- building ---------------------------------------------------------------------------
-    def _add_field(self, form: QtWidgets.QFormLayout, f: Field) -> None:
+    def _add_field(self, form: QtWidgets.QFormLayout, f: Field, section: str = "") -> None:
         if f.kind == "flag":
             box = QtWidgets.QCheckBox()
             box.toggled.connect(lambda _v: self.changed.emit())
@@ -224,7 +285,7 @@ class SettingsForm(QtWidgets.QWidget):
         label.setToolTip(f.tooltip)
         error = _error_label()
         form.addRow(label, _stacked(widget, error))
-        self._entries[f.key] = _Entry(f, widget, error, get, put)
+        self._entries[f.key] = _Entry(f, widget, error, get, put, section=section)
 
     def add_rows(self, section: str, key: str, label: str, table: RowsTable) -> None:
         """Add an array of tables (``key``) to a section."""
@@ -234,7 +295,9 @@ class SettingsForm(QtWidgets.QWidget):
         table.changed.connect(self.changed.emit)
         form.addRow(QtWidgets.QLabel(label))
         form.addRow(_stacked(table, error))
-        self._entries[key] = _Entry(None, table, error, table.rows, table.set_rows, table)
+        self._entries[key] = _Entry(
+            None, table, error, table.rows, table.set_rows, table, section=section
+        )
 
     # -- values -----------------------------------------------------------------------------
     def widget(self, key: str) -> QtWidgets.QWidget:
@@ -288,6 +351,8 @@ class SettingsForm(QtWidgets.QWidget):
             where = path[len(key) - len(key.rsplit(".", 1)[-1]) :] if path.startswith(key) else path
             entry.error.setText(f"{where}: {problem}")
             entry.error.show()
+            if entry.section in self.collapsible:
+                self.collapsible[entry.section].set_expanded(True)  # the error must be seen
             if entry.rows is not None:
                 entry.rows.mark_row(row)
             else:

@@ -1,5 +1,9 @@
 """Multi-harmonic FRF plots: magnitude and phase of every order, one column per order.
 
+Each column is a Bode plot: the magnitude above the phase on one frequency axis, labelled
+(ticks and title, with its unit) under the phase; the y axes have the same width in every
+column, and each plot keeps room for its titles and a data area however small the grid.
+
 Used live (the FRFs growing step by step), by the run browser (a file's FRFs) and by the
 workbench (measured against model). A series is one curve in every column: a sweep at one
 level, measured or predicted.
@@ -17,6 +21,11 @@ from PySide6 import QtCore, QtWidgets
 from rig.gui.style import legend_html, make_plot
 
 __all__ = ["FrfPlots", "FrfSeries", "frf_unit", "sweep_series"]
+
+#: Width of the y axes (tick labels and title), the same in every column [px].
+_LEFT_AXIS_PX = 62
+#: Least height of a plot's data area [px].
+_MIN_VIEW_PX = 48
 
 _QUANTITY_UNITS = {"acceleration": "(m/s²)/N", "velocity": "(m/s)/N", "displacement": "m/N"}
 
@@ -95,7 +104,8 @@ class FrfPlots(QtWidgets.QWidget):
         self.legend.setTextFormat(QtCore.Qt.TextFormat.RichText)
         self._grid = QtWidgets.QGridLayout()
         self._grid.setContentsMargins(0, 0, 0, 0)
-        self._grid.setSpacing(4)
+        self._grid.setHorizontalSpacing(4)
+        self._grid.setVerticalSpacing(0)  # magnitude and phase: one plot
         outer = QtWidgets.QVBoxLayout(self)
         outer.setContentsMargins(0, 0, 0, 0)
         outer.setSpacing(2)
@@ -116,34 +126,39 @@ class FrfPlots(QtWidgets.QWidget):
         self._orders, self._unit, self._channel = orders, unit, channel
         for w in self.magnitude + self.phase:
             self._grid.removeWidget(w)
+            w.hide()
             w.deleteLater()
         self.magnitude, self.phase = [], []
+        of = f" of {channel}" if channel else ""
         for k, order in enumerate(orders):
-            of = f" of {channel}" if channel else ""
+            # magnitude above phase on one frequency axis: its ticks and title are the phase's
             mag = make_plot(
                 f"order {order}: |H|{of}",
                 "",
                 f"|H| [{unit}]",
                 log_y=True,
                 legend=False,
+                x_values=False,
             )
-            ph = make_plot(
-                f"order {order}: phase{of}",
-                "fundamental frequency [Hz]",
-                "phase [deg]",
-                legend=False,
-            )
+            ph = make_plot("", "fundamental frequency [Hz]", "phase [deg]", legend=False)
+            ph.getPlotItem().setTitle(None)
             ph.getPlotItem().setYRange(-180, 180, padding=0.02)
-            ph.getPlotItem().getAxis("left").setTicks(
-                [[(v, str(v)) for v in (-180, -90, 0, 90, 180)]]
-            )
+            left = ph.getPlotItem().getAxis("left")
+            left.setTicks([[(v, str(v)) for v in (-180, -90, 0, 90, 180)]])
             ph.setXLink(mag)
+            for plot in (mag, ph):  # the same width in every column: the curves line up
+                plot.getPlotItem().getAxis("left").setWidth(_LEFT_AXIS_PX)
+                item = plot.getPlotItem()
+                hint = item.effectiveSizeHint(QtCore.Qt.SizeHint.MinimumSize)
+                title = item.getAxis("left").label.boundingRect().width()  # drawn upright
+                view = max(_MIN_VIEW_PX, int(title) + 4)
+                plot.setMinimumHeight(int(hint.height()) + view)
             self._grid.addWidget(mag, 0, k)
             self._grid.addWidget(ph, 1, k)
             self.magnitude.append(mag)
             self.phase.append(ph)
-        self._grid.setRowStretch(0, 3)
-        self._grid.setRowStretch(1, 2)
+        self._grid.setRowStretch(0, 4)
+        self._grid.setRowStretch(1, 3)
 
     def clear(self) -> None:
         for w in self.magnitude + self.phase:

@@ -6,11 +6,19 @@ It re-checks everything a moment after every edit: the plan and the setup by the
 the plan's points against the setup's channels (:meth:`rig.setup.LabSetup.channels_for_points`);
 a problem is shown next to the field that causes it and the run cannot start until it is fixed.
 :meth:`RunSetupPanel.request` gives the :class:`~rig.gui.controller.RunRequest` to start.
+
+The measurement file of a run is a new one: by default ``run-YYYYmmdd-HHMMSS.h5`` in the runs
+folder (:func:`runs_folder`, ``~/clearance-rig-runs`` unless ``CLEARANCE_RIG_RUNS`` names
+another), and after each run a new name next to the last file (:func:`next_free_path`). A
+file is replaced only when the operator ticks *replace an existing file*.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import os
+import re
+import time
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +32,64 @@ from rig.plans import Plan
 from rig.setup import LabSetup, load_setup, setup_from_dict
 from rig.tomlconfig import ConfigError
 
-__all__ = ["RunSetupPanel", "simulated_truths"]
+__all__ = [
+    "RUNS_FOLDER_ENV",
+    "RunSetupPanel",
+    "fresh_run_path",
+    "next_free_path",
+    "runs_folder",
+    "simulated_truths",
+]
+
+#: Environment variable naming the folder of the GUI's new measurement files.
+RUNS_FOLDER_ENV = "CLEARANCE_RIG_RUNS"
+
+_STAMPED = re.compile(r"^run-\d{8}-\d{6}(-\d+)?$")
+_NUMBERED = re.compile(r"^(.*?)-(\d+)$")
+
+
+def runs_folder() -> Path:
+    """Where the GUI puts new measurement files: ``$CLEARANCE_RIG_RUNS`` or
+    ``~/clearance-rig-runs`` (created when the first run starts)."""
+    named = os.environ.get(RUNS_FOLDER_ENV, "").strip()
+    return Path(named).expanduser() if named else Path.home() / "clearance-rig-runs"
+
+
+def _short(folder: Path) -> str:
+    """A folder as a person writes it (``~/clearance-rig-runs``)."""
+    try:
+        return str(Path("~") / Path(folder).resolve().relative_to(Path.home().resolve()))
+    except ValueError:
+        return str(folder)
+
+
+def _numbered(folder: Path, stem: str, suffix: str, n: int) -> Path:
+    """``folder/stem-n.suffix`` with the first ``n`` not taken."""
+    while (folder / f"{stem}-{n}{suffix}").exists():
+        n += 1
+    return folder / f"{stem}-{n}{suffix}"
+
+
+def fresh_run_path(folder: Path | None = None, now: float | None = None) -> Path:
+    """A file that does not exist yet: ``run-YYYYmmdd-HHMMSS.h5`` in ``folder`` (default
+    :func:`runs_folder`), ``-2``, ``-3``... appended when that name is taken."""
+    folder = runs_folder() if folder is None else Path(folder)
+    stem = "run-" + time.strftime("%Y%m%d-%H%M%S", time.localtime(now))
+    path = folder / f"{stem}.h5"
+    return _numbered(folder, stem, ".h5", 2) if path.exists() else path
+
+
+def next_free_path(last: Path, now: float | None = None) -> Path:
+    """A new file next to ``last``: a new time stamp for a stamped name, otherwise the name
+    numbered (``beam.h5`` -> ``beam-2.h5``, ``beam-2.h5`` -> ``beam-3.h5``)."""
+    last = Path(last)
+    suffix = last.suffix or ".h5"
+    if _STAMPED.match(last.stem):
+        return fresh_run_path(last.parent, now)
+    numbered = _NUMBERED.match(last.stem)
+    if numbered:
+        return _numbered(last.parent, numbered.group(1), suffix, int(numbered.group(2)) + 1)
+    return _numbered(last.parent, last.stem, suffix, 2)
 
 
 def simulated_truths() -> list[str]:
@@ -58,9 +123,16 @@ class BackendBox(QtWidgets.QWidget):
         self.realtime = QtWidgets.QCheckBox("pace to the clock (as slow as a real test)")
         self.device = QtWidgets.QLineEdit()
         self.device.setPlaceholderText("the setup's DAQ device")
-        self.path = QtWidgets.QLineEdit("run.h5")
+        self.path = QtWidgets.QLineEdit(str(fresh_run_path()))
+        self.path.setToolTip(
+            f"a new file for each run, by default in {runs_folder()} (the folder is made when "
+            f"the run starts; {RUNS_FOLDER_ENV} names another)"
+        )
         browse = QtWidgets.QPushButton("Browse…")
         browse.clicked.connect(self._browse)
+        self.new_file = QtWidgets.QPushButton("New file")
+        self.new_file.setToolTip("a new, unused file name next to this one")
+        self.new_file.clicked.connect(self.use_new_file)
         self.overwrite = QtWidgets.QCheckBox("replace an existing file")
         self.pause_on_fault = QtWidgets.QCheckBox(
             "pause on recoverable faults (clipping, silent sensor, lost force, amplifier overload)"
@@ -87,6 +159,7 @@ class BackendBox(QtWidgets.QWidget):
         out = QtWidgets.QGroupBox("Measurement file")
         row = QtWidgets.QHBoxLayout()
         row.addWidget(self.path, 1)
+        row.addWidget(self.new_file)
         row.addWidget(browse)
         form2 = QtWidgets.QFormLayout(out)
         form2.addRow("file", row)
@@ -126,9 +199,18 @@ class BackendBox(QtWidgets.QWidget):
         self.device.setEnabled(not sim)
         self.changed.emit()
 
+    def use_new_file(self) -> Path:
+        """Put a new, unused file name next to the current one (or in the runs folder)."""
+        text = self.path.text().strip()
+        path = next_free_path(Path(text).expanduser()) if text else fresh_run_path()
+        self.path.setText(str(path))
+        return path
+
     def _browse(self) -> None:
+        text = self.path.text().strip()
+        start = text if text and Path(text).expanduser().parent.is_dir() else ""
         name, _ = QtWidgets.QFileDialog.getSaveFileName(
-            self, "Measurement file", self.path.text(), "HDF5 files (*.h5)"
+            self, "Measurement file", start or str(runs_folder()), "HDF5 files (*.h5)"
         )
         if name:
             self.path.setText(name)
@@ -225,8 +307,10 @@ class RunSetupPanel(QtWidgets.QTabWidget):
         self.valid = not problem
         self.problem = problem
         if self.valid:
+            into = self.resume_path or Path(self.run_box.path.text().strip()).expanduser()
             self.status.setText(
-                f"<span style='color:{OK}'>ready: {plan.name} on {setup.name}</span>"
+                f"<span style='color:{OK}'>ready: {plan.name} on {setup.name}, into "
+                f"{into.name} in {_short(into.parent)}</span>"
             )
         else:
             self.status.setText(f"<span style='color:{ALARM}'>not ready: {problem}</span>")
@@ -241,13 +325,36 @@ class RunSetupPanel(QtWidgets.QTabWidget):
             problem = ""
         elif not text:
             problem = "name the measurement file"
-        elif Path(text).exists() and not box.overwrite.isChecked():
-            problem = f"{text} exists: tick 'replace an existing file' or choose another name"
-        elif not Path(text).resolve().parent.is_dir():
-            problem = f"the folder of {text} does not exist"
+        elif Path(text).expanduser().exists() and not box.overwrite.isChecked():
+            problem = (
+                f"{Path(text).name} exists (a run is already in it): press 'New file' for a new "
+                "name, choose another with 'Browse…', or tick 'replace an existing file'"
+            )
+        elif not self._folder_ready(Path(text).expanduser()):
+            problem = (
+                f"the folder of {text} does not exist: choose a file in an existing folder "
+                "('Browse…')"
+            )
         box.path_error.setText(problem)
         box.path_error.setVisible(bool(problem))
         return problem
+
+    @staticmethod
+    def _folder_ready(path: Path) -> bool:
+        """The file's folder exists, or is the runs folder (made when the run starts)."""
+        folder = path.resolve().parent
+        return folder.is_dir() or folder == runs_folder().resolve()
+
+    def after_run(self, path: Path | None) -> None:
+        """A run wrote ``path``: the next one gets a new file next to it (a file is replaced
+        only when the operator ticks the box), then everything is checked again."""
+        box = self.run_box
+        current = box.path.text().strip()
+        written = path is not None and current and Path(current).name == Path(path).name
+        taken = bool(current) and Path(current).expanduser().exists()
+        if self.resume_path is None and (written or taken) and not box.overwrite.isChecked():
+            box.use_new_file()
+        self.check()
 
     # -- resume ----------------------------------------------------------------------------
     def set_resume(self, path: Path, data) -> None:
@@ -296,10 +403,13 @@ class RunSetupPanel(QtWidgets.QTabWidget):
             raise ValueError(problem)
         box = self.run_box
         resume = self.resume_path is not None
+        path = self.resume_path if resume else Path(box.path.text().strip()).expanduser()
+        if not pretest_only:
+            path.parent.mkdir(parents=True, exist_ok=True)  # the runs folder on a first run
         return RunRequest(
             plan=self.plan,
             setup=self.setup,
-            path=self.resume_path if resume else Path(box.path.text().strip()),
+            path=path,
             backend=box.backend,
             backend_options=box.options(),
             overwrite=box.overwrite.isChecked(),

@@ -21,6 +21,7 @@ __all__ = [
     "WARN",
     "color",
     "configure_app",
+    "fit_bottom_axis",
     "LogAxis",
     "heading",
     "legend_html",
@@ -95,6 +96,7 @@ def make_plot(
     *,
     log_y: bool = False,
     legend: bool = True,
+    x_values: bool = True,
     parent: QtWidgets.QWidget | None = None,
 ) -> pg.PlotWidget:
     """A plot with a title, axis labels (units in brackets), a grid and a legend.
@@ -108,6 +110,8 @@ def make_plot(
         Logarithmic y axis.
     legend : bool
         Add a legend (curves with a ``name`` appear in it).
+    x_values : bool
+        Label the x ticks (False for a plot whose x axis is the one of the plot below it).
     """
     pg.setConfigOptions(background="w", foreground="k", antialias=True)
     axes = {"left": LogAxis(orientation="left")} if log_y else None
@@ -121,6 +125,7 @@ def make_plot(
         axis = item.getAxis(name)
         axis.enableAutoSIPrefix(False)
         axis.setStyle(tickFont=_axis_font())
+    fit_bottom_axis(w, values=x_values)
     item.showGrid(x=True, y=True, alpha=0.25)
     if log_y:
         item.setLogMode(False, True)
@@ -130,6 +135,26 @@ def make_plot(
         leg.setPen(pg.mkPen("#999999"))
     w.setMinimumSize(220, 160)
     return w
+
+
+def fit_bottom_axis(plot: pg.PlotWidget, *, values: bool = True) -> None:
+    """Make the x axis tall enough for its tick labels and its whole title.
+
+    pyqtgraph reserves 80 % of the title's height and sets the title 5 px below the axis, so
+    a title in a short plot loses its lower part; this fixes the axis height from the fonts
+    (tick labels, their offset, the whole title) and keeps a margin below it for the nudge.
+    """
+    item = plot.getPlotItem()
+    axis = item.getAxis("bottom")
+    axis.setStyle(showValues=values)
+    height = max(0, axis.style["tickLength"])
+    if values:
+        font = axis.style.get("tickFont") or _axis_font()
+        height += QtGui.QFontMetrics(font).height() + axis.style["tickTextOffset"][1] + 2
+    if axis.label.isVisible() and axis.labelText:
+        height += axis.label.boundingRect().height()
+    axis.setHeight(max(int(math.ceil(height)), 4))
+    item.setContentsMargins(6, 2, 8, 6)  # the titles' nudge, the last tick label
 
 
 def legend_html(items, marker: str = "■") -> str:

@@ -262,8 +262,8 @@ class WorkbenchPanel(QtWidgets.QWidget):
 
         def done(result: Any) -> None:
             self._end_task()
-            on_done(result)
             self._say(f"{name} done")
+            on_done(result)  # may say more
             self.task_finished.emit(name, True)
 
         def failed(message: str) -> None:
@@ -316,6 +316,23 @@ class WorkbenchPanel(QtWidgets.QWidget):
         self.comparison, self.before = cmp, None
         self._show_comparison(self.model_label)
         self.tabs.setCurrentIndex(0)
+        self._say(
+            f"compared with {self.model_label}: residual {cmp.rms_over_noise:.3g} x noise "
+            "(FRFs here, per sensor and order in the residual map)"
+        )
+
+    def compare_run(self, path: str | Path) -> bool:
+        """Open a run and compare it with the model (the shipped reference rig when none is
+        loaded): the FRFs and residual maps appear when the comparison ends. False, with the
+        reason in the status line, when it cannot start."""
+        if self.task is not None:
+            self._say(f"{self.task.name} is running: open {Path(path).name} when it ends")
+            return False
+        if not self.open_run(path):
+            return False
+        if self.model is None and not self.open_model(None):
+            return False
+        return self.compare()
 
     def diagnose(self) -> bool:
         """Which effect is missing (in a worker thread, with progress)."""

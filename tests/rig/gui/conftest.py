@@ -36,6 +36,14 @@ def _qt_binding_works(qapp):
     configure_app(qapp)
 
 
+@pytest.fixture(autouse=True)
+def _runs_folder(tmp_path, monkeypatch) -> Path:
+    """The GUI's new measurement files go to a temporary folder, not the user's home."""
+    folder = tmp_path / "clearance-rig-runs"
+    monkeypatch.setenv("CLEARANCE_RIG_RUNS", str(folder))
+    return folder
+
+
 @pytest.fixture(scope="session")
 def lock_dir(tmp_path_factory) -> Path:
     """Device locks of these tests (apart from any other run on the machine)."""

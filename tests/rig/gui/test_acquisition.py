@@ -3,6 +3,8 @@ and resume, abort and completing the file from the run browser, the amplifier's 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 from PySide6 import QtCore
 
@@ -107,8 +109,15 @@ def test_pretest_then_a_whole_run_with_pause_and_resume(qtbot, lock_dir, tmp_pat
     f, lv, sweep, h = acq.live.frf(acq.live.channel_names.index("acc7"))
     rows = lv == 0
     np.testing.assert_allclose(h[rows, 0], data.select(level_index=0).frf("acc7")[:, 0], rtol=1e-12)
-    assert not controls.pause.isEnabled() and not controls.start.isEnabled()  # the file exists
-    assert "exists" in acq.setup_panel.problem
+    # the next run gets a new file next to this one: ready, and nothing is overwritten
+    box = acq.setup_panel.run_box
+    assert Path(box.path.text()) == path.with_name("quick-2.h5")
+    assert acq.setup_panel.valid and controls.start.isEnabled() and not controls.pause.isEnabled()
+    box.path.setText(str(path))
+    assert not acq.setup_panel.check() and not controls.start.isEnabled()
+    assert "quick.h5 exists" in acq.setup_panel.problem
+    assert "'New file'" in acq.setup_panel.problem  # and says what to do
+    box.path.setText(str(path.with_name("quick-2.h5")))
     # the finished run opened in the browser
     assert window.browser.path == path and window.browser.step_count() == 10
     screenshot(window, "acquisition-finished.png")
