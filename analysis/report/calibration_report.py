@@ -184,7 +184,7 @@ def parameter_rows(
                 interval_source = "prior"
         if low is None and s is not None:
             low, high = value - Z95 * s, value + Z95 * s
-            interval_source = "value +- 1.96 sigma"
+            interval_source = "value \u00b1 1.96\u03c3"
         note = str(reasons.get(name) or "")
         if st == "held" and pr is not None:
             note = (note + "; " if note else "") + f"prior 1 sigma {100 * pr:.3g} %"
@@ -314,7 +314,7 @@ def _report_figures(folder: Path, cal: dict, cv: dict | None, units: dict) -> li
             {
                 "src": p,
                 "caption": "Cross-validation: each fold's estimate relative to the mean of the "
-                "folds, with the 1-sigma of the folds (CV) and of the noise alone (FIM^-1).",
+                "folds, 1-sigma of the folds (CV) and of the noise alone (FIM\u207b\u00b9).",
             }
         )
     elif (folder / "crossval.png").exists():

@@ -85,6 +85,7 @@ def _env(autoescape: bool) -> jinja2.Environment:
         unit=(lambda u: Markup(html_unit(u))) if autoescape else (lambda u: u or ""),
         md=md_inline,
         cell=md_cell,
+        g=lambda x: "" if x is None else format(float(x), "g"),
     )
     return env
 
@@ -118,6 +119,7 @@ HTML = r"""<!doctype html>
  figure { margin: 1em 0 2em; }
  figure img { max-width: 100%; border: 1px solid #eaeef2; }
  figcaption { font-size: 0.9em; color: #57606a; }
+ dt { font-weight: 600; }
  code { background: #f3f5f8; padding: 0 0.25em; border-radius: 3px; }
 </style>
 </head>
@@ -129,14 +131,14 @@ HTML = r"""<!doctype html>
 <ul>
  <li>Measurement: <code>{{ measurement_file or "not recorded" }}</code>{% if model_source %};
      model: <code>{{ model_source }}</code>{% endif %}</li>
- <li>Calibration levels: {{ calibration_levels|join(", ") }} N{% if validation_level is not none %};
-     held out for validation: {{ validation_level|num(3) }} N{% endif %}</li>
+ <li>Calibration levels: {{ calibration_levels|map("g")|join(", ") }} N{% if validation_level is not none %};
+     held out for validation: {{ validation_level|g }} N{% endif %}</li>
  <li>Fit: &chi;<sup>2</sup> per degree of freedom {{ chi2_per_dof|num(4) }}
      {%- if n_residuals %} over {{ n_residuals }} residuals{% endif %}
      {%- if weighting %} (weighting: {{ weighting }}){% endif %};
      Levenberg-Marquardt: {{ lm.nit }} iterations, {{ lm.message }}</li>
 {% if validation %}
- <li>Validation at {{ validation.level|num(3) }} N:
+ <li>Validation at {{ validation.level|g }} N:
      <span class="badge {{ 'pass' if validation.passed else 'fail' }}">{{ 'PASS' if validation.passed else 'FAIL' }}</span>
      &chi;<sup>2</sup>/dof {{ validation.chi2_per_dof|num(3) }} (threshold {{ validation.threshold|num(3) }})</li>
 {% endif %}
@@ -185,7 +187,7 @@ with &sigma; the reported 1-sigma; &ldquo;inside&rdquo;: the reference lies in t
  <td class="num">[{{ r.low|num(4) }}, {{ r.high|num(4) }}]{% if r.interval_source and r.interval_source != "stated" %} <span class="small">({{ r.interval_source }})</span>{% endif %}</td>
 {% if reference %}
 {% if r.reference is not none %}
- <td class="num">{{ r.reference|num(5) }}</td><td class="num">{{ r.error_pct|signed("+.3g") }}</td><td class="num">{{ r.z|signed }}</td>
+ <td class="num">{{ r.reference|num(5) }}</td><td class="num">{{ r.error_pct|signed("+.2f") }}</td><td class="num">{{ r.z|signed }}</td>
  <td>{% if r.inside is not none %}<span class="badge {{ 'yes' if r.inside else 'no' }}">{{ 'yes' if r.inside else 'no' }}</span>{% endif %}</td>
 {% else %}
  <td colspan="4" class="small">{{ r.reference_note }}</td>
@@ -216,7 +218,7 @@ with &sigma; the reported 1-sigma; &ldquo;inside&rdquo;: the reference lies in t
 <tbody>
 {% for m in modal_damping %}
 <tr><td class="num">{{ m.mode }}</td><td class="num">{{ (100 * m.zeta)|num(3) }}</td>
-{% if reference %}<td class="num">{{ (100 * m.reference) | num(3) if m.reference is not none else "" }}</td><td class="num">{{ m.error_pct|signed("+.3g") }}</td>{% endif %}</tr>
+{% if reference %}<td class="num">{{ (100 * m.reference) | num(3) if m.reference is not none else "" }}</td><td class="num">{{ m.error_pct|signed("+.2f") }}</td>{% endif %}</tr>
 {% endfor %}
 </tbody>
 </table>
@@ -283,7 +285,7 @@ with &sigma; the reported 1-sigma; &ldquo;inside&rdquo;: the reference lies in t
 
 {% if validation %}
 <h2>Validation</h2>
-<p>Held-out level {{ validation.level|num(3) }} N ({{ validation.n_steps }} steps, channels {{ validation.channels|join(", ") }}):
+<p>Held-out level {{ validation.level|g }} N ({{ validation.n_steps }} steps, channels {{ validation.channels|join(", ") }}):
 <span class="badge {{ 'pass' if validation.passed else 'fail' }}">{{ 'PASS' if validation.passed else 'FAIL' }}</span>
 &chi;<sup>2</sup> per degree of freedom {{ validation.chi2_per_dof|num(3) }} (passes at most {{ validation.threshold|num(3) }});
 {{ (100 * validation.within_2sigma)|num(3) if validation.within_2sigma is not none else "&ndash;"|safe }}&nbsp;% of the FRF values within 2&sigma;
@@ -316,11 +318,11 @@ MARKDOWN = r"""# Calibration report
 Folder `{{ folder }}`; all paths relative to this report's folder.
 
 - Measurement: `{{ measurement_file or "not recorded" }}`
-- Calibration levels: {{ calibration_levels|join(", ") }} N{% if validation_level is not none %}; held out: {{ validation_level|num(3) }} N{% endif %}
+- Calibration levels: {{ calibration_levels|map("g")|join(", ") }} N{% if validation_level is not none %}; held out: {{ validation_level|g }} N{% endif %}
 
 - Fit: chi2 per degree of freedom {{ chi2_per_dof|num(4) }}; LM {{ lm.nit }} iterations, {{ lm.message }}
 {% if validation %}
-- Validation at {{ validation.level|num(3) }} N: **{{ 'PASS' if validation.passed else 'FAIL' }}**, chi2/dof {{ validation.chi2_per_dof|num(3) }} (threshold {{ validation.threshold|num(3) }})
+- Validation at {{ validation.level|g }} N: **{{ 'PASS' if validation.passed else 'FAIL' }}**, chi2/dof {{ validation.chi2_per_dof|num(3) }} (threshold {{ validation.threshold|num(3) }})
 {% endif %}
 {% if reference and reference.coverage %}
 - Reference ({{ reference.source }}): {{ reference.coverage.inside }} of {{ reference.coverage.n }} values inside the stated 95 % intervals
@@ -332,7 +334,7 @@ Folder `{{ folder }}`; all paths relative to this report's folder.
 |---|---|{% if status %}---|{% endif %}---:|---:|{% if noise %}---:|{% endif %}---|{% if reference %}---:|---:|---:|---|{% endif %}
 
 {% for r in rows %}
-| {{ r.name }} | {{ r.unit }} |{% if status %} {{ r.status|replace("_", " ") }}{% if r.status_note %} ({{ r.status_note|cell }}){% endif %} |{% endif %} {{ r.value|num(5) }} | {{ r.std|num(2) }} |{% if noise %} {{ r.std_noise|num(2) }} |{% endif %} [{{ r.low|num(4) }}, {{ r.high|num(4) }}] |{% if reference %}{% if r.reference is not none %} {{ r.reference|num(5) }} | {{ r.error_pct|signed("+.3g") }} | {{ r.z|signed }} | {{ "" if r.inside is none else ("yes" if r.inside else "no") }} |{% else %} | | | {{ r.reference_note|cell }} |{% endif %}{% endif %}
+| {{ r.name }} | {{ r.unit }} |{% if status %} {{ r.status|replace("_", " ") }}{% if r.status_note %} ({{ r.status_note|cell }}){% endif %} |{% endif %} {{ r.value|num(5) }} | {{ r.std|num(2) }} |{% if noise %} {{ r.std_noise|num(2) }} |{% endif %} [{{ r.low|num(4) }}, {{ r.high|num(4) }}] |{% if reference %}{% if r.reference is not none %} {{ r.reference|num(5) }} | {{ r.error_pct|signed("+.2f") }} | {{ r.z|signed }} | {{ "" if r.inside is none else ("yes" if r.inside else "no") }} |{% else %} | | | {{ r.reference_note|cell }} |{% endif %}{% endif %}
 
 {% endfor %}
 {% endmacro %}
