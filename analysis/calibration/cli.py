@@ -266,7 +266,7 @@ def cmd_validate(args) -> dict:
 def cmd_report(args) -> dict:
     from analysis.report.calibration_report import write_report
 
-    paths = write_report(Path(args.folder))
+    paths = write_report(Path(args.folder), reference=args.reference)
     if not args.json:
         print(f"report: {paths['html']}")
     return {k: str(v) for k, v in paths.items()}
@@ -336,6 +336,12 @@ def add_parsers(sub) -> None:
 
     sp = sub.add_parser("report", help="collect a folder's results into one report")
     sp.add_argument("folder", help="folder written by calibrate/crossval/validate")
+    sp.add_argument(
+        "--reference",
+        metavar="FILE",
+        help="reference values (JSON with 'parameters', e.g. a simulated rig's truth.json): "
+        "tables add the reference, the error, z and whether it lies in the 95 %% interval",
+    )
     sp.set_defaults(func=cmd_report)
 
     for name in ("calibrate", "crossval", "validate", "report"):

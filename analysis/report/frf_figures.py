@@ -11,6 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from analysis.report.units import mathtext_unit  # noqa: E402
+
 __all__ = ["plot_branches", "plot_multiharmonic_frfs"]
 
 
@@ -39,29 +41,38 @@ def plot_multiharmonic_frfs(
     path : str or Path
         PNG file to write.
     """
+    from analysis.report.calibration_figures import frf_quantity
+
     n_o, n_s = len(orders), len(sensor_labels)
     fig, axes = plt.subplots(
-        2 * n_s, n_o, figsize=(4.2 * n_o, 2.6 * 2 * n_s), sharex=True, squeeze=False
+        2 * n_s, n_o, figsize=(4.2 * n_o, 2.6 * 2 * n_s + 0.5), sharex=True, squeeze=False
     )
-    for label, H in frfs.items():
+    handles = []
+    for H in frfs.values():
         for s in range(n_s):
             for o in range(n_o):
-                axes[2 * s, o].semilogy(frequency_hz, np.abs(H[:, o, s]), ".-", ms=3, label=label)
+                (h,) = axes[2 * s, o].semilogy(frequency_hz, np.abs(H[:, o, s]), ".-", ms=3)
+                if s == o == 0:
+                    handles.append(h)
                 axes[2 * s + 1, o].plot(frequency_hz, np.degrees(np.angle(H[:, o, s])), ".", ms=3)
     for o in range(n_o):
         axes[0, o].set_title(f"order {orders[o]}")
         axes[-1, o].set_xlabel("fundamental frequency [Hz]")
     for s in range(n_s):
-        axes[2 * s, 0].set_ylabel(f"{sensor_labels[s]}\n|H| [{unit}]")
+        q = frf_quantity(unit)
+        axes[2 * s, 0].set_ylabel(f"{sensor_labels[s]}\n|{q}| [{mathtext_unit(unit)}]")
         axes[2 * s + 1, 0].set_ylabel("phase [deg]")
         for o in range(n_o):
             axes[2 * s + 1, o].set_ylim(-185, 185)
             axes[2 * s, o].grid(True, which="both", alpha=0.3)
             axes[2 * s + 1, o].grid(True, alpha=0.3)
-    axes[0, 0].legend(fontsize=8)
+    # below the axes: a legend on the first panel would hide the low level's jump
+    rows = int(np.ceil(len(handles) / 6)) if handles else 0
+    if handles:
+        fig.legend(handles, list(frfs), loc="lower center", ncol=6, fontsize=8, frameon=True)
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, (0.28 * rows + 0.12) / fig.get_figheight() if rows else 0, 1, 1))
     path = Path(path)
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -100,7 +111,7 @@ def plot_branches(
     ax.set_xlabel("fundamental frequency [Hz]")
     ax.set_ylabel(ylabel)
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, ncol=2)
+    ax.legend(fontsize=8, ncol=2, loc="best", frameon=True, framealpha=0.9)
     if title:
         ax.set_title(title)
     fig.tight_layout()
