@@ -1,5 +1,5 @@
 # One-command entry points for a fresh machine. Every target creates .venv on first use.
-#   make setup     the virtual environment with the GUI and test extras
+#   make setup     the virtual environment with the GUI, test and Dask extras
 #   make gui-deps  (as root, Debian/Ubuntu) the system packages the GUI needs: Qt's X11 (xcb)
 #                  plugin libraries, and Xvfb, xdotool, x11-utils and imagemagick, with which the
 #                  tests start the real GUI on a virtual display and take a screenshot
@@ -23,8 +23,8 @@ GUI_DEBS := libegl1 libgl1 libfontconfig1 libdbus-1-3 libxkbcommon0 libxkbcommon
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --upgrade pip >/dev/null
-	$(PY) -m pip install -e ".[gui,test]"
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e ".[gui,test,dask]"
 	touch $@
 
 setup: $(VENV)/.installed

@@ -27,8 +27,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 from benchmarks.diagnose import FRONT_ENDS, _code_version, _key
 from sim_backend.truth import TRUTH_DIR
 

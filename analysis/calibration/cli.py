@@ -32,6 +32,7 @@ from analysis.calibration.uncertainty import (
 from analysis.calibration.validation import validate
 from analysis.executors import make_executor
 from analysis.measurement_file import SteppedSineData, read_measurement
+from analysis.measurement_file.status import require_steps
 from analysis.model import load_model
 
 __all__ = ["add_parsers"]
@@ -67,7 +68,7 @@ def _stepped(path: str) -> SteppedSineData:
             if hasattr(data, "kind")
             else f"{path}: not a stepped-sine run"
         )
-    return data
+    return require_steps(data)
 
 
 def _fit_figure(model, data, params, st, out: Path, levels, name: str, title: str):
