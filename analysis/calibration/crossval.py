@@ -201,6 +201,7 @@ def cross_validate(
         Runs the folds in parallel.
     """
     t0 = time.perf_counter()
+    model = calibration.conditioned(model)
     st = calibration.settings
     space = calibration.space
     pred = make_predictor(model, data, st)

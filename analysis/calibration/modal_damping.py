@@ -17,12 +17,23 @@ from analysis.mhb.solver import solve_point
 from analysis.model import Model
 from analysis.predict_branches import BranchMatchedPredictor
 
-__all__ = ["ZETA", "DampedPredictor", "damped_space", "zeta_name"]
+__all__ = ["ZETA", "DampedPredictor", "damped_space", "with_values", "zeta_name"]
 
 
 def zeta_name(mode: int) -> str:
     """The parameter name of mode ``mode``'s damping ratio (1-based, as ``[damping.per_mode]``)."""
     return f"{ZETA}{int(mode)}"
+
+
+def with_values(model: Model, values: dict[str, float]) -> Model:
+    """``model`` with parameter values and modal damping ratios (``zeta_<mode>``) replaced."""
+    zetas = {int(n[len(ZETA) :]): float(v) for n, v in values.items() if n.startswith(ZETA)}
+    plain = {n: v for n, v in values.items() if not n.startswith(ZETA)}
+    out = model.with_values(plain) if plain else model
+    if zetas:
+        per_mode = {**out.damping.per_mode, **zetas}
+        out = out.with_damping(dataclasses.replace(out.damping, per_mode=per_mode))
+    return out
 
 
 #: Prefix of a modal damping ratio calibrated with the parameters: ``"zeta_4"`` is mode 4's.

@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import concurrent.futures as cf
+import dataclasses
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -16,6 +17,7 @@ import numpy as np
 
 from analysis.calibration.lhs import Distribution, latin_hypercube, paper_distributions
 from analysis.calibration.lm import LeastSquaresResult, least_squares_lm
+from analysis.calibration.modal_damping import DampedPredictor, damped_space, with_values
 from analysis.calibration.objective import FRFObjective
 from analysis.calibration.parameters import ParameterSpace
 from analysis.calibration.uncertainty import (
@@ -77,6 +79,12 @@ class CalibrationSettings:
     include_unconverged : bool
         Also fit the steps the file marks as not converged under force control (their force
         is off target and the response may not have settled).
+    joint : bool
+        With held values of known uncertainty (``held``), refine the calibrated parameters
+        jointly with them under their covariance as a Gaussian prior (the linear test's
+        posterior): the stepped sine then corrects what it can of the held values and the
+        stated intervals are the joint posterior's marginals. False: the held values stay
+        where they are and their uncertainty is only carried through the sensitivities.
     """
 
     parameters: tuple[str, ...] = ("k_c", "gap", "v_c")
@@ -93,6 +101,7 @@ class CalibrationSettings:
     n_time: int = 128
     match_branches: bool = True
     include_unconverged: bool = False
+    joint: bool = True
 
     def __post_init__(self) -> None:
         if not self.parameters:
@@ -209,6 +218,9 @@ class NonlinearCalibration:
     noise_scale: np.ndarray | None = None
     fold_ratio: np.ndarray | None = None
     fold_misfit: list[str] = field(default_factory=list)
+    held_posterior: dict[str, float] | None = None
+    joint_names: tuple[str, ...] | None = None
+    cov_joint: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = self.space.size
@@ -276,15 +288,34 @@ class NonlinearCalibration:
         for i, n in enumerate(names):
             row = {"noise": float(sd_noise[i]),
                    "misfit": float(sd_noise[i] * np.sqrt(max(k[i] ** 2 - 1, 0.0)))}  # fmt: skip
-            if self.held is not None and self.held_gain is not None:
+            if self.cov_joint is not None:  # jointly refined: what is left of them together
+                row["held values"] = float(np.sqrt(max(self.held_cov[i, i], 0.0)))
+            elif self.held is not None and self.held_gain is not None:
                 for j, h in enumerate(self.held.names):
                     row[h] = float(abs(self.held_gain[i, j]) * np.sqrt(self.held.cov[j, j]))
             out[n] = row
         return out
 
+    def conditioned(self, model: Model) -> Model:
+        """``model`` with the held values the calibration ended at (the joint refinement's;
+        unchanged without one): the model its parameters are calibrated for."""
+        return with_values(model, self.held_posterior) if self.held_posterior else model
+
     def calibrated_model(self, model: Model) -> Model:
-        """``model`` with the calibrated values."""
-        return model.with_values(self.parameters)
+        """``model`` with the calibrated values (and the held values the calibration ended
+        at)."""
+        return self.conditioned(model).with_values(self.parameters)
+
+    def joint_covariance(self) -> tuple[tuple[str, ...], np.ndarray]:
+        """Names and covariance of the calibrated parameters with the held values (as
+        reported: the calibrated block is ``cov``); the calibrated block alone when there is
+        no joint refinement."""
+        if self.cov_joint is None or self.joint_names is None:
+            return tuple(self.space.names), self.cov
+        C = np.array(self.cov_joint, dtype=float)
+        n = self.space.size
+        C[:n, :n] = self.cov
+        return self.joint_names, C
 
     def to_json(self) -> dict:
         names = list(self.space.names)
@@ -309,6 +340,9 @@ class NonlinearCalibration:
                 "held_gain": None if self.held_gain is None else self.held_gain.tolist(),
                 "contributions": self.contributions(),
                 "notes": [] if self.held is None else list(self.held.notes),
+                "held_posterior": self.held_posterior,
+                "joint_names": None if self.joint_names is None else list(self.joint_names),
+                "cov_joint": None if self.cov_joint is None else self.cov_joint.tolist(),
             },
             "rms_over_noise": self.rms_over_noise,
             "adequate_rms": ADEQUATE_RMS,
@@ -520,14 +554,90 @@ def calibrate_nonlinear(
         cov_noise=cov,
         held=held,
     )
-    if objective.weighting == "uncertainty":
-        result.noise_scale = noise_scale(chi2) * np.ones(n)
     if held is not None and held.names:
         t0 = time.perf_counter()
-        prop: Propagation = propagate_held(
-            objective, best.x, best.jac, model.with_values(result.parameters), held
-        )
-        result.held_cov, result.held_gain = prop.cov, prop.gain
+        if st.joint and objective.weighting == "uncertainty":
+            _joint_refinement(result, model, data, objective, progress)
+        else:
+            prop: Propagation = propagate_held(
+                objective, best.x, best.jac, model.with_values(result.parameters), held
+            )
+            result.held_cov, result.held_gain = prop.cov, prop.gain
         result.timings["held_s"] = time.perf_counter() - t0
+    if objective.weighting == "uncertainty":
+        result.noise_scale = noise_scale(result.chi2_per_dof) * np.ones(n)
     result.combine()
     return result
+
+
+class _GaussianPrior:
+    """Residuals with a Gaussian prior on the last ``k`` coordinates appended:
+    ``L^-1 (theta_b - theta_b0)`` with ``L L^T`` their prior covariance, so the cost is the
+    negative log posterior (the data residuals are already unit-variance)."""
+
+    def __init__(self, objective, n_free: int, center: np.ndarray, cov: np.ndarray) -> None:
+        self.objective, self.n = objective, n_free
+        self.center = np.asarray(center, dtype=float)
+        self.whiten = np.linalg.inv(np.linalg.cholesky(cov))
+
+    def __call__(self, theta, want_jac: bool = True):
+        r, J = self.objective(theta, want_jac)
+        rp = self.whiten @ (np.asarray(theta, dtype=float)[self.n :] - self.center)
+        if not np.all(np.isfinite(r)):
+            return np.full(r.size + rp.size, np.nan), None
+        r = np.concatenate([r, rp])
+        if J is None:
+            return r, None
+        Jp = np.zeros((rp.size, J.shape[1]))
+        Jp[:, self.n :] = self.whiten
+        return r, np.vstack([J, Jp])
+
+
+def _joint_refinement(result, model, data, objective, progress) -> None:
+    """Refine the calibrated parameters jointly with the held values under their covariance as
+    a prior (the linear test's posterior): the stepped sine corrects what it can of them, and
+    the calibrated parameters' covariance is the joint posterior's marginal. ``cov_noise``
+    becomes the noise-only covariance at the joint optimum with the held values fixed (what the
+    folds' scatter compares with), ``held_cov`` what the held values' uncertainty adds."""
+    st, space, held = result.settings, result.space, result.held
+    k = space.size
+    names = (*space.names, *held.names)
+    start = {**result.parameters, **held.values}
+    pred = DampedPredictor(
+        model, data, channels=st.channels, n_harmonics=st.n_harmonics, n_time=st.n_time
+    )
+    sp = damped_space(model, names)
+    obj = FRFObjective(pred, sp, objective.mask, objective.weighting)
+    obj.sigma, obj._weight = objective.sigma, objective._weight
+    x0 = sp.to_theta([start[nm] for nm in names])
+    lo, hi = sp.theta_bounds()
+    x0 = np.clip(x0, lo, hi)
+    Db = sp.dp_dtheta(x0)[k:]
+    prior = _GaussianPrior(obj, k, x0[k:], held.cov / np.outer(Db, Db))
+    res = least_squares_lm(
+        prior, x0, bounds=(lo, hi), max_iterations=st.max_iterations,
+        callback=(lambda h: progress("joint", h)) if progress else None,
+    )  # fmt: skip
+    nb = len(held.names)
+    J = res.jac[:-nb]
+    D = sp.dp_dtheta(res.x)
+    cov_joint = res.cov * np.outer(D, D)
+    Ja = J[:, :k]
+    cov_noise = np.linalg.pinv(Ja.T @ Ja) * np.outer(D[:k], D[:k])
+    values = sp.as_dict(sp.to_physical(res.x))
+    m = J.shape[0]
+    data_cost = 0.5 * float(res.fun[:-nb] @ res.fun[:-nb])
+    result.parameters = {nm: values[nm] for nm in space.names}
+    result.held_posterior = {nm: values[nm] for nm in held.names}
+    result.joint_names, result.cov_joint = names, cov_joint
+    result.cov_noise = cov_noise
+    result.held_cov = cov_joint[:k, :k] - cov_noise
+    # d calibrated / d held at fixed data, from the joint normal equations without the prior
+    result.held_gain = -np.linalg.lstsq(J[:, :k] / D[:k], J[:, k:] / D[k:], rcond=None)[0]
+    result.chi2_per_dof = float(2 * data_cost / max(m - k, 1))
+    result.lm = dataclasses.replace(
+        result.lm, x=res.x[:k], cost=data_cost, nit=result.lm.nit + res.nit,
+        history=[*result.lm.history, *({**h, "x": list(np.asarray(h["x"])[:k]), "joint": True}
+                                       for h in res.history)],
+    )  # fmt: skip
+    log.info("joint refinement: %s (chi2/dof %.3g)", values, result.chi2_per_dof)

@@ -96,5 +96,9 @@ def load_calibration(path: str | Path) -> tuple[NonlinearCalibration, Model, str
         ratio = unc.get("fold_ratio")
         res.fold_ratio = None if ratio is None else np.array(ratio, dtype=float)
         res.fold_misfit = list(doc.get("fold_misfit", []))
+        res.held_posterior = unc.get("held_posterior")
+        if unc.get("joint_names") is not None:
+            res.joint_names = tuple(unc["joint_names"])
+            res.cov_joint = np.array(unc["cov_joint"], dtype=float)
         res.combine()
     return res, model, doc.get("measurement_file", "")

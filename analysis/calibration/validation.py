@@ -9,16 +9,20 @@ complex value, each real part with half the complex variance) is at most ``thres
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
 
+from analysis.calibration.modal_damping import DampedPredictor
 from analysis.calibration.nonlinear import NonlinearCalibration, fitted_rows, make_predictor
 from analysis.calibration.uncertainty import ADEQUATE_RMS
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 
 __all__ = ["Validation", "validate"]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -95,11 +99,17 @@ def validate(
         raise ValueError("no validation level: the file has a single level; name one")
     st = calibration.settings
     rows = fitted_rows(data, [lv], st.include_unconverged)
-    pred = make_predictor(model, data, st)
-    names = list(calibration.space.names)
-    p = pred.predict(calibration.parameters, names, rows=rows)
+    names, C = calibration.joint_covariance()
+    base = calibration.conditioned(model)
+    if len(names) > calibration.space.size:  # the held values' uncertainty reaches the bands
+        pred = DampedPredictor(base, data, channels=st.channels, n_harmonics=st.n_harmonics,
+                               n_time=st.n_time)  # fmt: skip
+        if not st.match_branches:
+            log.info("validation: the bands use the branch-matched prediction")
+    else:
+        pred = make_predictor(base, data, st)
+    p = pred.predict(calibration.parameters, list(names), rows=rows)
     H, sH = pred.measured()
-    C = calibration.cov
     dre = np.stack([p.d_frf[n][rows].real for n in names], axis=-1)
     dim = np.stack([p.d_frf[n][rows].imag for n in names], axis=-1)
     var_model = np.einsum("...i,ij,...j->...", dre, C, dre) + np.einsum(
