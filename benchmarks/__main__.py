@@ -15,6 +15,7 @@ import sys  # noqa: E402
 
 SCENARIOS = {
     "calibrate": "benchmarks.calibrate",
+    "coverage": "benchmarks.coverage",
     "diagnose": "benchmarks.diagnose",
     "mhb": "benchmarks.mhb",
     "planning": "benchmarks.planning",

@@ -27,6 +27,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from benchmarks.diagnose import FRONT_ENDS, _code_version, _key
 from sim_backend.truth import TRUTH_DIR
 
@@ -95,6 +97,107 @@ def make_all(quick: bool = False) -> dict[tuple[str, int], tuple[Path, Path, flo
             except RuntimeError as exc:
                 print(f"{c[0]} seed {c[1]}: {exc}", file=sys.stderr)
         return out
+
+
+def _reference(truth: str, seed: int, path: Path) -> Path:
+    """The truth's values as the workflow writes them (``rig reference``)."""
+    _rig(["reference", "--truth", truth, "--seed", str(seed), "--out", str(path),
+          "--overwrite", "--json"], path.with_suffix(".log"))  # fmt: skip
+    return path
+
+
+def analyse(case: tuple[str, int], runs, folder: Path) -> dict:
+    """The workflow's analysis of one case's runs; the figures of its summary."""
+    from rig.workflow import analyse_runs
+
+    truth, seed = case
+    out = folder / f"{truth}-{seed}"
+    out.mkdir(parents=True, exist_ok=True)
+    ref = _reference(truth, seed, out / "truth.json")
+    lin, paper, _ = runs
+    t0 = time.perf_counter()
+    summary = analyse_runs(out, lin, paper, quiet=True, reference=ref,
+                           title=f"the {truth!r} simulated rig, seed {seed}")  # fmt: skip
+    held = list(summary["linear"].get("held", {}))
+    text = (out / "summary.md").read_text()
+    stages = {st["stage"]: st["seconds"] for st in summary["stages"]}
+    return {
+        "truth": truth,
+        "seed": seed,
+        "comparison": summary["comparison"],
+        "held": held,
+        "held_named": all(name in text for name in held),
+        "misfit": summary["verdict"]["misfit"],
+        "misfit_reasons": summary["verdict"]["reasons"],
+        "chi2_per_dof": summary["calibration"]["chi2_per_dof"],
+        "crossval_std_ratio": summary["crossval"].get("std_ratio"),
+        "validation_passed": summary["validation"]["passed"],
+        "calibration_s": stages.get("nonlinear calibration"),
+        "analysis_s": time.perf_counter() - t0,
+    }
+
+
+def _figures(results: dict, failed: dict) -> dict:
+    ref = [r for r in results.values() if r["truth"] == "reference"]
+    n_failed_ref = sum(1 for c in failed if c[0] == "reference")
+    pairs = [row for r in ref for row in r["comparison"].values()]
+    n_judged = len(pairs) + n_failed_ref * (len(NONLINEAR) + 5)  # a failed run: all missed
+    inside = sum(1 for row in pairs if row["inside_95"])
+    z = np.array([row["z"] for row in pairs if row["z"] is not None], dtype=float)
+
+    def err_max(name: str) -> float | None:
+        if n_failed_ref:
+            return None
+        return max(abs(r["comparison"][name]["error_rel"]) for r in ref)
+
+    gap_rel_sd = [r["comparison"]["gap"]["std"] / r["comparison"]["gap"]["value"] for r in ref]
+    by_truth: dict[str, list[bool]] = {}
+    for (t, _), r in sorted(results.items()):
+        by_truth.setdefault(t, []).append(r["misfit"])
+    cal_s = [r["calibration_s"] for r in ref if r["calibration_s"] is not None]
+    return {
+        "seeds": len(ref) + n_failed_ref,
+        "failed": [f"{t} seed {s}: {why}" for (t, s), why in failed.items()],
+        "gap_abs_rel_err_max": err_max("gap"),
+        "kc_abs_rel_err_max": err_max("k_c"),
+        "v_abs_rel_err_max": err_max("v_c"),
+        "coverage_95": inside / n_judged if n_judged else None,
+        "pairs": n_judged,
+        "z_abs_max": float(np.max(np.abs(z))) if z.size else None,
+        "z_rms": float(np.sqrt(np.mean(z**2))) if z.size else None,
+        "gap_sigma_rel_median": float(np.median(gap_rel_sd)) if gap_rel_sd else None,
+        "linear_held": {str(r["seed"]): r["held"] for r in ref},
+        "undetermined_named": all(r["held_named"] for r in ref),
+        "misfit_flagged": {t: by_truth.get(t, []) for t in ("mass_loading", "reference")},
+        "calibration_s_median": float(np.median(cal_s)) if cal_s else None,
+    }
+
+
+def run(quick: bool = False) -> dict:
+    t0 = time.perf_counter()
+    made = make_all(quick)
+    data_s = time.perf_counter() - t0
+    failed = {c: "its runs could not be made" for c in cases(quick) if c not in made}
+    results: dict[tuple[str, int], dict] = {}
+    folder = cache_dir().parent / "coverage-analysis"
+    shutil.rmtree(folder, ignore_errors=True)
+    with cf.ThreadPoolExecutor(PARALLEL) as ex:
+        futures = {c: ex.submit(analyse, c, runs, folder) for c, runs in made.items()}
+        for c, f in futures.items():
+            try:
+                results[c] = f.result()
+            except Exception as exc:  # a failed analysis counts as a miss
+                failed[c] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    for (t, s), r in sorted(results.items()):
+        z = {k: row["z"] for k, row in r["comparison"].items()}
+        print(f"{t} seed {s}: misfit {r['misfit']}, held {r['held']}, z "
+              + ", ".join(f"{k} {v:+.2f}" for k, v in z.items() if v is not None))  # fmt: skip
+    figures = _figures(results, failed)
+    figures["data_s"] = round(data_s, 1)
+    figures["total_s"] = round(time.perf_counter() - t0, 1)
+    figures["analysis_folder"] = str(folder)
+    figures["details"] = {f"{t}-{s}": r for (t, s), r in sorted(results.items())}
+    return figures
 
 
 if __name__ == "__main__":

@@ -3,14 +3,19 @@
 Each stage is the command a user would type, run in a child process and writing its own files
 into one folder, so the folder documents the study and any stage can be repeated by hand:
 
+0. ``rig reference``             (simulated rig) its truth, as ``truth.json``
 1. ``rig linear``                 random test, all 13 points, low level (gap open)
-2. ``analysis calibrate-linear`` damping-equalized linear calibration, modal damping
-3. ``analysis plan``             FIM pretest planning of the nonlinear test
-4. ``rig run paper``             stepped multi-sine under force control, 2/4/6/8 N
-5. ``analysis calibrate``        Latin hypercube + Levenberg-Marquardt on 2/4/6 N
-6. ``analysis crossval``         9-fold cross-validation
-7. ``analysis validate``         prediction of 8 N with uncertainty bands
-8. ``analysis report``           figures and tables; ``summary.md`` compares with the paper
+2. ``rig run paper``              stepped multi-sine under force control, 2/4/6/8 N
+3. ``analysis calibrate-linear``  damping-equalized linear calibration, modal damping; weak
+                                  parameters held at their prior (:func:`analyse_runs` on)
+4. ``analysis plan``              FIM pretest planning of the nonlinear test
+5. ``analysis calibrate``         Latin hypercube + Levenberg-Marquardt on 2/4/6 N, refined
+                                  jointly with the linear test's posterior, 9-fold
+                                  cross-validation, the stated intervals
+6. ``analysis validate``          prediction of 8 N with uncertainty bands
+7. ``analysis report``            figures and tables (against ``truth.json`` on the simulated
+                                  rig); ``summary.md`` gives the verdict and compares with the
+                                  paper
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["run_workflow"]
+__all__ = ["analyse_runs", "run_workflow", "verdict"]
 
 PAPER_TABLE2 = {
     "E_frame": 205e9,
@@ -32,6 +37,10 @@ PAPER_TABLE2 = {
 }
 PAPER_TABLE5 = {"k_c": 4.51e5, "gap": 0.61e-3, "v_c": 25.21}
 PAPER_TABLE4_TOP = "actuator 3, levels [2, 4, 6] N, range [21-40] Hz, sensors [4, 6, 7]"
+
+
+#: The simulated rig's truth, beside the results (never in a measurement file).
+TRUTH_FILE = "truth.json"
 
 
 class StageError(RuntimeError):
@@ -70,131 +79,235 @@ def run_workflow(
     """Run the whole paper workflow into folder ``out`` and return its summary.
 
     ``plan`` and ``linear_plan`` name the stepped-sine and random plans (built-in names or
-    plan files); ``lock_dir`` is the device-lock folder of the rig commands.
+    plan files); ``lock_dir`` is the device-lock folder of the rig commands. On the simulated
+    rig the truth's values are written to ``truth.json`` beside the results (``rig
+    reference``): the report and the summary show each calibrated value against them.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     log: list[dict] = []
     sim = ["--truth", truth, "--seed", str(seed)] if backend == "sim" else []
-    if lock_dir is not None:
-        sim += ["--lock-dir", str(lock_dir)]
+    rig_args = [*sim, *(["--lock-dir", str(lock_dir)] if lock_dir is not None else [])]
     lin_run = out / "linear.h5"
     paper_run = out / "paper.h5"
+    reference = None
+    if backend == "sim":
+        reference = out / TRUTH_FILE
+        _stage("reference values", ["-m", "rig", "reference", "--out", str(reference),
+                                    "--overwrite", *sim], log, quiet)  # fmt: skip
     _stage(
         "random test",
-        [
-            "-m",
-            "rig",
-            "linear",
-            str(linear_plan),
-            "--backend",
-            backend,
-            "--out",
-            str(lin_run),
-            "--overwrite",
-            "--quiet",
-            *sim,
-        ],
+        ["-m", "rig", "linear", str(linear_plan), "--backend", backend, "--out", str(lin_run),
+         "--overwrite", "--quiet", *rig_args],
         log,
         quiet,
-    )
-    lin = _stage(
-        "linear calibration",
-        ["-m", "analysis", "calibrate-linear", str(lin_run), "--out", str(out / "linear")],
-        log,
-        quiet,
-    )
-    lin_model = out / "linear" / "calibrated_model.toml"
-    planning = _stage(
-        "pretest planning",
-        ["-m", "analysis", "plan", "--model", str(lin_model), "--top", "5"],
-        log,
-        quiet,
-    )
-    (out / "planning.json").write_text(json.dumps(planning, indent=1))
+    )  # fmt: skip
+    lin, planning = _linear_stages(out, lin_run, log, quiet)
     run = _stage(
         "stepped-sine run",
-        [
-            "-m",
-            "rig",
-            "run",
-            str(plan),
-            "--backend",
-            backend,
-            "--out",
-            str(paper_run),
-            "--overwrite",
-            "--quiet",
-            *sim,
-        ],
+        ["-m", "rig", "run", str(plan), "--backend", backend, "--out", str(paper_run),
+         "--overwrite", "--quiet", *rig_args],
+        log,
+        quiet,
+    )  # fmt: skip
+    title = f"the {truth!r} simulated rig, seed {seed}" if backend == "sim" else "the rig"
+    return _nonlinear_stages(out, paper_run, lin, planning, run, starts, reference, title,
+                             log, quiet)  # fmt: skip
+
+
+def analyse_runs(
+    out: str | Path,
+    linear_run: str | Path,
+    stepped_run: str | Path,
+    *,
+    starts: int = 100,
+    quiet: bool = False,
+    reference: str | Path | None = None,
+    title: str = "the rig",
+) -> dict:
+    """The analysis part of the workflow on a random test and a stepped-sine run already made,
+    exactly as :func:`run_workflow` runs it (each stage the ``analysis`` command a user would
+    type, writing into ``out``); returns the summary and writes ``workflow.json`` and
+    ``summary.md``. ``reference``: a reference file (``truth.json``) the report and the
+    summary compare with; no calibration reads it.
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    log: list[dict] = []
+    lin, planning = _linear_stages(out, Path(linear_run), log, quiet)
+    return _nonlinear_stages(out, Path(stepped_run), lin, planning, {}, starts, reference,
+                             title, log, quiet)  # fmt: skip
+
+
+def _linear_stages(out: Path, linear_run: Path, log: list, quiet: bool) -> tuple[dict, dict]:
+    lin = _stage(
+        "linear calibration",
+        ["-m", "analysis", "calibrate-linear", str(linear_run), "--out", str(out / "linear")],
         log,
         quiet,
     )
+    planning = _stage(
+        "pretest planning",
+        ["-m", "analysis", "plan", "--model", str(out / "linear" / "calibrated_model.toml"),
+         "--top", "5"],
+        log,
+        quiet,
+    )  # fmt: skip
+    (out / "planning.json").write_text(json.dumps(planning, indent=1))
+    return lin, planning
+
+
+def _nonlinear_stages(out, stepped_run, lin, planning, run, starts, reference, title, log,
+                      quiet) -> dict:  # fmt: skip
     cal_dir = out / "nonlinear"
     cal = _stage(
         "nonlinear calibration",
-        [
-            "-m",
-            "analysis",
-            "calibrate",
-            str(paper_run),
-            "--model",
-            str(lin_model),
-            "--out",
-            str(cal_dir),
-            "--starts",
-            str(starts),
-        ],
+        ["-m", "analysis", "calibrate", str(stepped_run),
+         "--model", str(out / "linear" / "calibrated_model.toml"),
+         "--linear-result", str(out / "linear" / "linear_calibration.json"),
+         "--out", str(cal_dir), "--starts", str(starts)],
         log,
         quiet,
-    )
+    )  # fmt: skip
     result = str(cal_dir / "calibration.json")
-    cv = _stage("cross-validation", ["-m", "analysis", "crossval", "--result", result], log, quiet)
     val = _stage("validation", ["-m", "analysis", "validate", "--result", result], log, quiet)
-    _stage("report", ["-m", "analysis", "report", str(cal_dir)], log, quiet)
+    ref = [] if reference is None else ["--reference", str(reference)]
+    _stage("report", ["-m", "analysis", "report", str(cal_dir), *ref], log, quiet)
     summary = {
         "linear": lin,
         "planning": planning,
         "run": run,
         "calibration": cal,
-        "crossval": cv,
+        "crossval": cal.get("crossval", {}),
         "validation": val,
+        "verdict": verdict(cal, val),
+        "comparison": _reference_table(out, reference),
         "stages": log,
     }
     (out / "workflow.json").write_text(json.dumps(summary, indent=1, default=str))
-    md = _summary_markdown(summary, truth)
+    md = _summary_markdown(summary, title, reference)
     (out / "summary.md").write_text(md)
     if not quiet:
         print(md)
     return summary
 
 
-def _summary_markdown(s: dict, truth: str) -> str:
-    lin = s["linear"].get("parameters", {})
-    lin_std = s["linear"].get("std", {})
-    undetermined = s["linear"].get("undetermined", {})
-    cal = s["calibration"]["parameters"]
-    std = s["calibration"]["std"]
-    lines = [
-        f"# The paper's workflow on the {truth!r} rig",
-        "",
-        "## Linear calibration (Table 2)",
-        "",
-        "| parameter | calibrated | 1 sigma | paper (Table 2) |",
-        "|---|---|---|---|",
-    ]
-    for k, ref in PAPER_TABLE2.items():
-        v, sd = lin.get(k), lin_std.get(k)
-        lines.append(f"| {k} | {'' if v is None else f'{v:.4g}'} | "
-                     f"{'' if sd is None else f'{sd:.2g}'} | {ref:.4g} |")  # fmt: skip
-    if undetermined:
+def verdict(calibration: dict, validation: dict) -> dict:
+    """One verdict from the calibration (its fit and its cross-validation folds) and the
+    validation, judged by the one threshold every analysis uses: ``misfit`` with the reasons
+    (the stated intervals are then not to be trusted), or adequate."""
+    from analysis.calibration.uncertainty import ADEQUATE_RMS
+
+    reasons = list(calibration.get("misfit", []))
+    chi2 = validation.get("chi2_per_dof")
+    if validation and not validation.get("passed", True):
+        reasons.append(
+            f"the validation at {validation.get('level_n', 0):g} N misfits by "
+            f"{chi2**0.5:.3g} x the noise (adequate up to {ADEQUATE_RMS:g})"
+        )
+    return {"misfit": bool(reasons), "reasons": reasons, "adequate_rms": ADEQUATE_RMS}
+
+
+def _reference_table(out: Path, reference: str | Path | None) -> dict:
+    """Calibrated value, 95 % interval, reference, error and z of every parameter, linear and
+    nonlinear, as the report computes them ({} without a reference)."""
+    from analysis.report.calibration_report import load_reference, parameter_rows
+
+    if reference is None or not Path(reference).exists():
+        return {}
+    ref = load_reference(reference)
+    table = {}
+    for stage, path in (("linear", out / "linear" / "linear_calibration.json"),
+                        ("nonlinear", out / "nonlinear" / "calibration.json")):  # fmt: skip
+        doc = json.loads(path.read_text())
+        for row in parameter_rows(doc, {}, ref):
+            f = row.factor or 1.0
+            table[row.name] = {
+                "stage": stage,
+                "status": row.status or "fitted",
+                "value": row.value / f,
+                "std": None if row.std is None else row.std / f,
+                "interval_95": [
+                    None if row.low is None else row.low / f,
+                    None if row.high is None else row.high / f,
+                ],  # fmt: skip
+                "reference": None if row.reference is None else row.reference / f,
+                "error_rel": None if row.error_pct is None else row.error_pct / 100,
+                "z": row.z,
+                "inside_95": row.inside,
+                "unit": row.si_unit,
+            }
+    return table
+
+
+def _fmt(x, digits: int = 4) -> str:
+    return "" if x is None else f"{x:.{digits}g}"
+
+
+def _summary_markdown(s: dict, title: str, reference: str | Path | None) -> str:
+    v = s["verdict"]
+    lines = [f"# The paper's workflow on {title}", "", "## Verdict", ""]
+    if v["misfit"]:
         lines += [
+            "**The model misfits its data: the stated intervals are not to be trusted.** "
+            "The model lacks something the structure does; `python -m analysis diagnose` "
+            "looks for what:",
             "",
-            "Not determined by the random test (relative 1 sigma above 5 %): "
-            + ", ".join(f"{k} ({100 * r:.3g} %)" for k, r in undetermined.items())
-            + "; `linear/linear_calibration.json` lists the model modes they act on that the "
-            "test did not identify (`unidentified_modes`).",
+            *(f"- {why}" for why in v["reasons"]),
         ]
+    else:
+        cal, val = s["calibration"], s["validation"]
+        lines.append(
+            f"The model fits its data within {v['adequate_rms']:g} x the noise (calibration "
+            f"{cal['chi2_per_dof'] ** 0.5:.3g}, validation at {val['level_n']:g} N "
+            f"{val['chi2_per_dof'] ** 0.5:.3g}, no cross-validation fold misfits): the "
+            "stated intervals carry the noise, the misfit and the uncertainty of the values "
+            "the calibration holds (linear parameters, modal damping)."
+        )
+    comp = s.get("comparison") or {}
+    ref_cols = bool(comp)
+    head = "| parameter | status | calibrated | 95 % interval |"
+    rule = "|---|---|---|---|"
+    if ref_cols:
+        head += " truth | error | error / sigma |"
+        rule += "---|---|---|"
+
+    def table(stage: str, params: dict, std: dict, status: dict, paper: dict) -> list[str]:
+        out = [head + " paper |", rule + "---|"]
+        for k, value in params.items():
+            sd = std.get(k)
+            row = comp.get(k, {})
+            lo, hi = row.get("interval_95", [None, None]) if row else (None, None)
+            if lo is None and sd is not None:
+                lo, hi = value - 1.96 * sd, value + 1.96 * sd
+            cells = [k, status.get(k, "fitted"), _fmt(value), f"{_fmt(lo)} .. {_fmt(hi)}"]
+            if ref_cols:
+                err = row.get("error_rel")
+                z = row.get("z")
+                cells += [_fmt(row.get("reference")),
+                          "" if err is None else f"{100 * err:+.2f} %",
+                          "" if z is None else f"{z:+.2f}"]  # fmt: skip
+            cells.append(_fmt(paper.get(k)))
+            out.append("| " + " | ".join(cells) + " |")
+        return out
+
+    lin = s["linear"]
+    lines += ["", "## Linear calibration (Table 2)", ""]
+    lines += table("linear", lin.get("parameters", {}), lin.get("std", {}),
+                   lin.get("status", {}), PAPER_TABLE2)  # fmt: skip
+    held = lin.get("held", {})
+    if held:
+        lines += ["", "Not determined by the random test, held at the prior:", ""]
+        lines += [f"- **{k}**: {why}" for k, why in held.items()]
+    loose = {k: r for k, r in lin.get("undetermined", {}).items() if k not in held}
+    if loose:
+        lines += ["", "Fitted, but uncertain (relative 1 sigma above 5 %): "
+                  + ", ".join(f"{k} ({100 * r:.3g} %)" for k, r in loose.items())]  # fmt: skip
+    if ref_cols:
+        inside = [r["inside_95"] for r in comp.values() if r.get("inside_95") is not None]
+        lines += ["", f"{sum(inside)} of {len(inside)} truth values lie inside their stated 95 % "
+                  f"interval ({reference}: the simulated rig's truth, never read by the "
+                  "calibration)."]  # fmt: skip
     top = s["planning"].get("top", [])
     lines += [
         "",
@@ -210,38 +323,35 @@ def _summary_markdown(s: dict, truth: str) -> str:
             f"| {t.get('rank')} | {t.get('actuator')} | {t.get('levels_n')} | "
             f"{t.get('range_hz')} | {t.get('sensors')} | {t.get('det', 0):.3g} |"
         )
-    run = s["run"]
-    lines += [
-        "",
-        "## Stepped-sine run",
-        "",
-        "```",
-        json.dumps(run, indent=1)[:1500],
-        "```",
-        "",
-        "## Nonlinear calibration (Table 5)",
-        "",
-        "| parameter | calibrated | 1 sigma | paper (Table 5) |",
-        "|---|---|---|---|",
-    ]
-    for k, ref in PAPER_TABLE5.items():
-        lines.append(f"| {k} | {cal[k]:.4g} | {std[k]:.2g} | {ref:.4g} |")
-    cv = s["crossval"]
-    lines += ["", "## Cross-validation", "", "| parameter | CV std / FIM^-1 std |", "|---|---|"]
-    for n, r in zip(cv["names"], cv["std_ratio"], strict=True):
-        lines.append(f"| {n} | {r:.2f} |")
-    if cv.get("stuck"):
-        lines += ["", f"Warning: {len(cv['stuck'])} fold(s) could not leave the calibrated "
-                  "optimum; the standard deviations understate the uncertainty."]  # fmt: skip
-    if cv.get("notes"):
-        lines += ["", *(f"- {note}" for note in cv["notes"])]
-    v = s["validation"]
+    if s["run"]:
+        lines += ["", "## Stepped-sine run", "", "```", json.dumps(s["run"], indent=1)[:1500],
+                  "```"]  # fmt: skip
+    cal = s["calibration"]
+    lines += ["", "## Nonlinear calibration (Table 5)", ""]
+    lines += table("nonlinear", cal["parameters"], cal["std"], {}, PAPER_TABLE5)
+    noise = ", ".join(f"{k} {_fmt(x, 3)}" for k, x in cal.get("std_noise", {}).items())
+    held_from = cal.get("held") or "nowhere (held as exact)"
+    lines += ["", f"chi2/dof {cal['chi2_per_dof']:.3f}; the held values' uncertainty from "
+              f"{held_from}; noise-only 1 sigma: {noise}"]  # fmt: skip
+    cv = s.get("crossval") or {}
+    if cv:
+        lines += ["", "## Cross-validation", "",
+                  "| parameter | folds' std / noise-only (FIM^-1) std |", "|---|---|"]  # fmt: skip
+        for n, r in zip(cv["names"], cv["std_ratio"], strict=True):
+            lines.append(f"| {n} | {r:.2f} |")
+        if cv.get("stuck"):
+            lines += ["", f"{len(cv['stuck'])} fold(s) could not leave the calibrated optimum; "
+                      "their scatter understates the uncertainty."]  # fmt: skip
+        if cv.get("notes"):
+            lines += ["", *(f"- {note}" for note in cv["notes"])]
+    val = s["validation"]
     lines += [
         "",
         "## Validation",
         "",
-        f"{v['level_n']:g} N: {'PASS' if v['passed'] else 'FAIL'}, chi2/dof "
-        f"{v['chi2_per_dof']:.2f}, {100 * v['within_2sigma']:.0f} % within 2 sigma",
+        f"{val['level_n']:g} N: {'PASS' if val['passed'] else 'FAIL'}, chi2/dof "
+        f"{val['chi2_per_dof']:.2f} (threshold {val['threshold']:g}), "
+        f"{100 * val['within_2sigma']:.0f} % within 2 sigma",
         "",
         "Figures and tables: `nonlinear/report.html`.",
         "",

@@ -32,6 +32,7 @@ def save_calibration(
     doc["measurement_file"] = str(Path(data_path).resolve())
     doc["model_source"] = str(model.source)
     doc["model_toml"] = model.to_toml()
+    doc["units"] = {n: model.parameters[n].unit for n in result.space.names}
     json_path = out / "calibration.json"
     json_path.write_text(json.dumps(doc, indent=1))
     model_path = result.calibrated_model(model).save(out / "calibrated_model.toml")

@@ -108,7 +108,8 @@ def validate(
             log.info("validation: the bands use the branch-matched prediction")
     else:
         pred = make_predictor(base, data, st)
-    p = pred.predict(calibration.parameters, list(names), rows=rows)
+    values = {**(calibration.held_posterior or {}), **calibration.parameters}
+    p = pred.predict({n: values[n] for n in names}, list(names), rows=rows)
     H, sH = pred.measured()
     dre = np.stack([p.d_frf[n][rows].real for n in names], axis=-1)
     dim = np.stack([p.d_frf[n][rows].imag for n in names], axis=-1)

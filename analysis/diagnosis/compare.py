@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
+from analysis.calibration.uncertainty import ADEQUATE_RMS, adequate
 from analysis.measurement_file import SteppedSineData, require_steps
 from analysis.model import Model
 from analysis.predict import SteppedSinePredictor, check_standard_errors
@@ -88,6 +89,15 @@ class Comparison:
 
     @property
     def adequate(self) -> bool:
+        """Within :data:`~analysis.calibration.uncertainty.ADEQUATE_RMS` of the noise over the
+        whole file: the threshold every analysis judges a model by (calibration,
+        cross-validation, validation, diagnosis)."""
+        return adequate(self.rms_over_noise)
+
+    @property
+    def blocks_consistent(self) -> bool:
+        """Every block passes its own noise test (a stricter, local question: where a small
+        model error shows, it fails there even when the model is adequate overall)."""
         return all(b.consistent for b in self.blocks)
 
     def failing(self) -> list[Block]:
@@ -114,9 +124,19 @@ class Comparison:
         fails = self.failing()
         if not fails:
             lines.append("every block is consistent with the noise: the model is adequate here")
+            return "\n".join(lines)
+        if self.adequate:
+            lines.append(
+                f"adequate overall (within {ADEQUATE_RMS:g} x the noise, the threshold every "
+                f"analysis uses), but {len(fails)} of {len(self.blocks)} blocks fail their own "
+                "noise test: a small model error shows there; the worst:"
+            )
         else:
-            lines.append(f"{len(fails)} of {len(self.blocks)} blocks fail; the worst:")
-            lines += ["  " + b.verdict for b in fails[:n]]
+            lines.append(
+                f"the model misfits (above {ADEQUATE_RMS:g} x the noise): {len(fails)} of "
+                f"{len(self.blocks)} blocks fail; the worst:"
+            )
+        lines += ["  " + b.verdict for b in fails[:n]]
         lines += [f"note: {t}" for t in self.notes]
         return "\n".join(lines)
 
@@ -125,6 +145,8 @@ class Comparison:
             "chi2_per_dof": self.chi2_per_dof,
             "rms_over_noise": self.rms_over_noise,
             "adequate": self.adequate,
+            "adequate_rms": ADEQUATE_RMS,
+            "blocks_consistent": self.blocks_consistent,
             "alpha": self.alpha,
             "left_out_steps": self.left_out.tolist(),
             "notes": list(self.notes),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from analysis.calibration.uncertainty import ADEQUATE_RMS
 from analysis.diagnosis.candidates import Candidate
 from analysis.diagnosis.compare import Comparison
 from analysis.diagnosis.linear_screen import LinearFit
@@ -78,7 +79,7 @@ class DiagnosisSettings:
         and the verifications start from there (0: never).
     """
 
-    adequate_rms: float = 1.5
+    adequate_rms: float = ADEQUATE_RMS
     explained_rms: float = 2.0
     tie_bic: float = 10.0
     linear_bic: float = 10.0
