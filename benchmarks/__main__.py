@@ -31,7 +31,11 @@ def main(argv: list[str] | None = None) -> int:
     module = importlib.import_module(SCENARIOS[args.name])
     figures = module.run(quick=args.quick)
     figures["blas_threads"] = os.environ.get("OMP_NUM_THREADS")
-    print(json.dumps(figures))
+    if not args.quick:
+        from benchmarks.results import record
+
+        record(args.name, figures)
+    print(json.dumps(figures, default=str))
     return 0
 
 

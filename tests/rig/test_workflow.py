@@ -27,17 +27,18 @@ def workflow(tmp_path_factory):
 
 def test_every_stage_writes_its_files(workflow):
     out, summary = workflow
-    for name in ("linear.h5", "paper.h5", "linear/calibrated_model.toml", "planning.json",
+    for name in ("truth.json", "linear.h5", "paper.h5", "linear/calibrated_model.toml",
+                 "planning.json",
                  "nonlinear/calibration.json", "nonlinear/crossval.json",
                  "nonlinear/validation.json", "nonlinear/report.html", "summary.md",
                  "workflow.json"):  # fmt: skip
         assert (out / name).is_file(), name
     stages = [s["stage"] for s in json.loads((out / "workflow.json").read_text())["stages"]]
-    assert stages == ["random test", "linear calibration", "pretest planning",
-                      "stepped-sine run", "nonlinear calibration", "cross-validation",
+    assert stages == ["reference values", "random test", "linear calibration",
+                      "pretest planning", "stepped-sine run", "nonlinear calibration",
                       "validation", "report"]  # fmt: skip
     md = (out / "summary.md").read_text()
-    headings = ("Linear calibration (Table 2)", "Pretest planning (Table 4)",
+    headings = ("Verdict", "Linear calibration (Table 2)", "Pretest planning (Table 4)",
                 "Nonlinear calibration (Table 5)", "Cross-validation", "Validation")  # fmt: skip
     for heading in headings:
         assert f"## {heading}" in md
@@ -52,3 +53,29 @@ def test_the_calibrated_contact_is_near_the_truth(workflow):
     assert summary["validation"]["level_n"] == 8.0
     ratios = summary["crossval"]["std_ratio"]
     assert len(ratios) == 3 and all(r > 0 for r in ratios)  # the folds moved
+
+
+def test_every_parameter_is_shown_against_the_truth(workflow):
+    """On the simulated rig the summary and the report compare every parameter, linear and
+    nonlinear, with the truth the backend reported; the measurement files do not carry it."""
+    import h5py
+
+    out, summary = workflow
+    truth = json.loads((out / "truth.json").read_text())["parameters"]
+    table = summary["comparison"]
+    assert set(table) == set(truth)
+    for name, row in table.items():
+        assert row["reference"] == pytest.approx(truth[name])
+        lo, hi = row["interval_95"]
+        assert lo < row["value"] < hi
+        assert row["inside_95"] == (lo <= truth[name] <= hi)
+    md = (out / "summary.md").read_text()
+    assert (
+        "| parameter | status | calibrated | 95 % interval | truth | error | error / sigma |" in md
+    )
+    for held in summary["linear"].get("held", {}):
+        assert f"**{held}**" in md
+    with h5py.File(out / "paper.h5") as f:
+        names = []
+        f.visit(names.append)
+    assert not any("truth" in n.lower() for n in names)
