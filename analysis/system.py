@@ -24,7 +24,7 @@ __all__ = [
 ]
 
 #: Harmonics and AFT samples validated on the reference rig against time integration
-#: (``tests/analysis/mhb/test_rig_validation.py``; convergence in H in the README).
+#: (``tests/analysis/mhb/test_rig_validation.py``; convergence in H in docs/mhb.md).
 DEFAULT_HARMONICS = 9
 DEFAULT_TIME_SAMPLES = 128
 

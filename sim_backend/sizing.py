@@ -1,6 +1,6 @@
 """How visible a hidden effect is in the paper's stepped-sine test, in units of the noise.
 
-The paper's test (``rig.md``): drive at point 3, accelerometers at 3, 6 and 7, fundamental
+The paper's test (``docs/rig.md``): drive at point 3, accelerometers at 3, 6 and 7, fundamental
 force 2, 4, 6 and 8 N with 2 % second and third harmonics, 21-40 Hz in 1 Hz steps refined to
 0.1 Hz in 24-28 Hz. :func:`truth_misfit` sweeps a truth and the reference truth at those
 prescribed forces with the multi-harmonic balance of the structure (20 harmonics, 1024 AFT

@@ -1,4 +1,4 @@
-"""Import directions of ARCHITECTURE.md, checked on the source (ast), so they stay true.
+"""Import directions of docs/architecture.md, checked on the source (ast), so they stay true.
 
 - analysis imports no other project package, no Qt, no hardware package; matplotlib only in
   analysis/report.

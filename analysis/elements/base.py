@@ -3,7 +3,7 @@
 An element is a force law ``f(u, v)`` acting between DOF ``a`` and DOF ``b`` (or ground), with
 ``u = q_a - q_b`` and ``v = dq_a/dt - dq_b/dt`` (``q_b = 0`` for a grounded element). ``f`` is
 the force the element exerts **on the structure at DOF a** (the reaction ``-f`` acts at ``b``);
-a linear spring of stiffness ``k`` is therefore ``f = -k u``. This is the sign of ``rig.md``:
+a linear spring of stiffness ``k`` is therefore ``f = -k u``. This is the sign of ``docs/rig.md``:
 the bump stop pushes the beam tip up (``f > 0``) while the tip is below ``-gap``.
 
 A new element type is one small subclass: set ``kind``, ``param_names`` and ``param_units``

@@ -1,4 +1,4 @@
-"""Hertzian contact with quadratic damping: the bump stop of ``rig.md``."""
+"""Hertzian contact with quadratic damping: the bump stop of ``docs/rig.md``."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ __all__ = ["HertzContact"]
 class HertzContact(OneSidedStop):
     """Hertzian bump stop with quadratic damping, the paper's law kept exactly.
 
-    With ``side = -1`` (default, stop below, as in ``rig.md``)::
+    With ``side = -1`` (default, stop below, as in ``docs/rig.md``)::
 
         f = k_c (-u - gap)^1.5 - v * vel * |vel|     for u < -gap
         f = 0                                        otherwise

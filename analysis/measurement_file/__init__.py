@@ -1,4 +1,6 @@
-"""The measurement file: the one implementation of the rig/analysis contract (measurement-file.md).
+"""The measurement file: the one implementation of the rig/analysis contract.
+
+The contract is ``docs/measurement-file.md``.
 
 A run of the rig is one HDF5 file; the rig writes it with this package and analysis reads it
 with this package, as must any other tool. The reader validates everything and fails with a

@@ -1,8 +1,8 @@
 """Constants, errors and array checks of the measurement-file contract (format_version 1).
 
 Everything the writer and the reader must agree on lives here: the names and allowed values of
-the contract (measurement-file.md), the layout of the per-step datasets, and one array checker used
-both to validate data before it is written and to validate data read from a file.
+the contract (docs/measurement-file.md), the layout of the per-step datasets, and one array
+checker used both to validate data before it is written and to validate data read from a file.
 
 The record types users construct (:class:`~analysis.measurement_file.records.ChannelInfo` and
 friends) are in :mod:`analysis.measurement_file.records`.

@@ -6,7 +6,7 @@ each block every order has a whole number of cycles, and the DFT bin of that cyc
 exact least-squares phasor of the order (no leakage, no window). Block phasors are averaged;
 their scatter gives the standard error of the mean.
 
-Phasor convention (``measurement-file.md``): ``x(t) = Re{sum_k X_k exp(i omega_k t)}`` with
+Phasor convention (``docs/measurement-file.md``): ``x(t) = Re{sum_k X_k exp(i omega_k t)}`` with
 ``|X_k|`` the amplitude and ``t = 0`` at the start of the first averaged block.
 
 Leakage

@@ -1,7 +1,7 @@
 """Tests of the nonlinear element library ``analysis.elements``.
 
 References are independent of the implementation: central finite differences for every
-derivative, the closed-form laws of ``rig.md`` and the element brief written out with scalar
+derivative, the closed-form laws of ``docs/rig.md`` and the element brief written out with scalar
 ``math`` at chosen points, and mirror/averaging identities.
 """
 
@@ -23,8 +23,8 @@ from analysis.elements import (
     register,
 )
 
-# Typical values for each kind (rig.md's calibrated contact, stiffnesses of the same order), the
-# displacement scale [m] and velocity scale [m/s] the samples are drawn from.
+# Typical values for each kind (docs/rig.md's calibrated contact, stiffnesses of the same order),
+# the displacement scale [m] and velocity scale [m/s] the samples are drawn from.
 EXAMPLES: list[tuple[str, dict, float, float]] = [
     ("hertz_contact", {"k_c": 4.51e5, "gap": 6.1e-4, "v": 25.21}, 2e-3, 0.2),
     ("hertz_contact", {"k_c": 1e6, "gap": 1e-3, "v": 10.0, "side": 1}, 3e-3, 0.2),
@@ -59,7 +59,7 @@ def _sign(x: float) -> float:
 
 def _hertz(p: dict, u: float, vel: float) -> float:
     k_c, d, c, side = p["k_c"], p["gap"], p["v"], p.get("side", -1)
-    if side == -1:  # rig.md, literally
+    if side == -1:  # docs/rig.md, literally
         return k_c * (abs(u) - d) ** 1.5 - c * vel * abs(vel) if u < -d else 0.0
     return -k_c * (u - d) ** 1.5 - c * vel * abs(vel) if u > d else 0.0
 

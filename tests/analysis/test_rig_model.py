@@ -1,4 +1,4 @@
-"""The shipped reference rig against the data of the paper (rig.md)."""
+"""The shipped reference rig against the data of the paper (docs/rig.md)."""
 
 from __future__ import annotations
 
@@ -48,7 +48,7 @@ def test_masses_match_the_rig(rig):
     assert frame == pytest.approx(20.78, abs=0.01)
     assert beam == pytest.approx(1.98, abs=0.01)
     assert report["total"] == pytest.approx(frame + beam + report["sensors"], rel=1e-12)
-    # Tube centrelines alone: about 15.3 kg at 7795 kg/m^3 (rig.md).
+    # Tube centrelines alone: about 15.3 kg at 7795 kg/m^3 (docs/rig.md).
     tube_area = 0.080**2 - 0.068**2
     assert report["frame structural"] == pytest.approx(0.958 * tube_area * 7795, rel=1e-9)
 

@@ -1,7 +1,7 @@
 """Helpers of the GUI tests: screenshots, the window on a test lock.
 
 Screenshots go to a temporary folder; ``CLEARANCE_RIG_SCREENSHOTS=docs/screenshots pytest
-tests/rig/gui`` refreshes the ones the README shows.
+tests/rig/gui`` refreshes the ones docs/gui.md shows.
 """
 
 from __future__ import annotations
