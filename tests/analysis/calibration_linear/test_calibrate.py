@@ -139,6 +139,35 @@ def test_parameters_the_test_leaves_undetermined_are_named(tmp_path: Path) -> No
     doc = json.loads(json.dumps(result.to_json()))
     assert doc["undetermined"] == pytest.approx(bad)
     assert len(doc["unidentified_modes"]) == 2
+    # not just named: held at the nominal value with the prior's uncertainty, and said why
+    assert result.status["rho_corner"] == "held" and doc["status"]["rho_corner"] == "held"
+    assert result.parameters["rho_corner"] == load_model().parameters["rho_corner"].nominal
+    prior = load_model().parameters["rho_corner"].prior_rel_std
+    assert result.std["rho_corner"] == pytest.approx(prior * result.parameters["rho_corner"])
+    assert "information" in doc["status_reason"]["rho_corner"]
+    assert "held at its nominal value: rho_corner" in notes
+
+
+def test_a_parameter_that_runs_to_a_bound_is_held_not_passed_on(tmp_path: Path) -> None:
+    """A frame stiffer than the model's range allows (E_frame 340 GPa, upper bound 300, as a
+    file from a rig whose frame differs from the model's would ask): the fit runs E_frame to
+    its bound; it is reported as such and held at its nominal value with its prior, the
+    calibrated model file does not carry the bound value, and the others are fitted with it
+    held and its uncertainty carried into theirs."""
+    run = write_rig_run(tmp_path / "stiff.h5", noise=0.02, seed=4,
+                        values={**TRUE_VALUES, "E_frame": 340e9})  # fmt: skip
+    nominal = load_model()
+    result = calibrate_linear(nominal, run)
+    assert result.status["E_frame"] == "held"
+    assert "upper bound 3e+11 Pa" in result.status_reason["E_frame"]
+    assert result.parameters["E_frame"] == nominal.parameters["E_frame"].nominal
+    assert result.model.parameters["E_frame"].value == nominal.parameters["E_frame"].nominal
+    assert all(result.status[n] == "fitted" for n in ("E_beam", "k_mount"))
+    prior = nominal.parameters["E_frame"].prior_rel_std
+    assert result.std["E_frame"] == pytest.approx(prior * result.parameters["E_frame"])
+    # the held value's uncertainty reaches the others: correlated with it, wider than alone
+    i, j = result.names.index("E_frame"), result.names.index("E_corner")
+    assert result.cov[i, j] != 0.0
 
 
 def test_trf_from_a_far_start(clean_run) -> None:
