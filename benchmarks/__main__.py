@@ -29,12 +29,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="a reduced run (for smoke tests)")
     args = parser.parse_args(argv)
     module = importlib.import_module(SCENARIOS[args.name])
+    from benchmarks.results import code_version
+
+    code = code_version()  # as the run starts: what it measures
     figures = module.run(quick=args.quick)
     figures["blas_threads"] = os.environ.get("OMP_NUM_THREADS")
     if not args.quick:
         from benchmarks.results import record
 
-        record(args.name, figures)
+        record(args.name, figures, code=code)
     print(json.dumps(figures, default=str))
     return 0
 

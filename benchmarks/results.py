@@ -32,12 +32,29 @@ def machine() -> dict:
             "numpy": np.__version__, "blas_threads": os.environ.get("OMP_NUM_THREADS")}  # fmt: skip
 
 
-def record(name: str, figures: dict, folder: Path = FOLDER, markdown: Path = MARKDOWN) -> Path:
-    """Write one benchmark's figures and make ``RESULTS.md`` again."""
+def code_version() -> str:
+    """The commit measured (``+changes`` when the work tree differs from it)."""
+    import subprocess
+
+    root = Path(__file__).resolve().parent.parent
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, text=True,
+                              capture_output=True, check=True).stdout.strip()  # fmt: skip
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                               cwd=root, text=True, capture_output=True).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + ("+changes" if dirty else "")
+
+
+def record(name: str, figures: dict, folder: Path = FOLDER, markdown: Path = MARKDOWN,
+           code: str | None = None) -> Path:  # fmt: skip
+    """Write one benchmark's figures and make ``RESULTS.md`` again; ``code``: the commit the
+    figures were measured on (default: the work tree's, as the run ends)."""
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{name}.json"
     doc = {"benchmark": name, "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-           "machine": machine(), "figures": figures}  # fmt: skip
+           "code": code or code_version(), "machine": machine(), "figures": figures}  # fmt: skip
     path.write_text(json.dumps(doc, indent=1, default=str) + "\n")
     write_markdown(folder, markdown)
     return path
@@ -59,10 +76,12 @@ def write_markdown(folder: Path = FOLDER, markdown: Path = MARKDOWN) -> Path:
     for path in sorted(folder.glob("*.json")):
         doc = json.loads(path.read_text())
         m = doc.get("machine", {})
-        lines += [f"## `{doc['benchmark']}`", "",
-                  f"{doc['date']}; {m.get('cpus')} CPUs ({m.get('cpu')}), Python "
-                  f"{m.get('python')}, numpy {m.get('numpy')}, BLAS threads "
-                  f"{m.get('blas_threads')}", "", "| figure | value |", "|---|---|"]  # fmt: skip
+        where = (
+            f"{doc['date']}, code {doc.get('code', 'unknown')}; {m.get('cpus')} CPUs "
+            f"({m.get('cpu')}), Python {m.get('python')}, numpy {m.get('numpy')}, BLAS threads "
+            f"{doc['figures'].get('blas_threads', m.get('blas_threads'))}"
+        )
+        lines += [f"## `{doc['benchmark']}`", "", where, "", "| figure | value |", "|---|---|"]
         for key, value in doc["figures"].items():
             if key != "details":
                 lines.append(f"| `{key}` | {_cell(value)} |")

@@ -144,7 +144,7 @@ def test_parameters_the_test_leaves_undetermined_are_named(tmp_path: Path) -> No
     assert result.parameters["rho_corner"] == load_model().parameters["rho_corner"].nominal
     prior = load_model().parameters["rho_corner"].prior_rel_std
     assert result.std["rho_corner"] == pytest.approx(prior * result.parameters["rho_corner"])
-    assert "information" in doc["status_reason"]["rho_corner"]
+    assert "held at its nominal 4000 kg/m^3" in doc["status_reason"]["rho_corner"]
     assert "held at its nominal value: rho_corner" in notes
 
 
