@@ -290,7 +290,7 @@ def calibrate_linear(
             st,
         )
         cov_d, estimator = data_covariance(sol.jac, sol.fun, clusters)
-        new = {} if st.weak_parameters == "fit" else decide_weak(model, sub, sol.x, cov_d)
+        new = {} if st.weak_parameters == "fit" else _first(decide_weak(model, sub, sol.x, cov_d))
         if not new:
             break
         held.update(new)
@@ -468,7 +468,19 @@ def decide_weak(model: Model, space: ParameterSpace, x: np.ndarray, cov: np.ndar
             out[name] = {"status": "at_bound", "reason": (
                 f"{why}: {held_at}; no prior is known (give prior_rel_std in the model file), "
                 "so its uncertainty is not known")}  # fmt: skip
+        # a bound first, then the least informed: the others are fitted again with it held
+        out[name]["priority"] = (bool(side), float(1.0 - share[i]))
     return out
+
+
+def _first(weak: dict) -> dict:
+    """The one parameter to hold next: holding one changes what the test says of the others
+    (a parameter that ran to its bound drags those it trades with along), so they are judged
+    again after the refit."""
+    if not weak:
+        return {}
+    name = max(weak, key=lambda n: weak[n]["priority"])
+    return {name: {k: v for k, v in weak[name].items() if k != "priority"}}
 
 
 def _prior_precision(model: Model, names) -> np.ndarray:

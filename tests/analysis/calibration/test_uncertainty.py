@@ -120,6 +120,7 @@ def test_a_parameter_the_test_barely_informs_is_held_at_its_prior():
     out = decide_weak(model, sp, x, cov)
     assert list(out) == ["rho_corner"]
     assert out["rho_corner"]["status"] == "held"
+    assert out["rho_corner"]["priority"] == (False, pytest.approx(0.8, abs=0.05))
     assert "information" in out["rho_corner"]["reason"]
     assert "4000" in out["rho_corner"]["reason"]  # held at the nominal, named with its unit
 
