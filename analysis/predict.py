@@ -30,6 +30,7 @@ from analysis.system import (
 )
 
 __all__ = [
+    "STOPPED_MESSAGE",
     "Prediction",
     "SteppedSinePredictor",
     "ZeroStandardError",
@@ -39,6 +40,13 @@ __all__ = [
 ]
 
 _POWER = {"displacement": 0, "velocity": 1, "acceleration": 2}
+
+#: The message of a prediction stopped at a needed step without a solution (``{n}``: the
+#: needed steps left without one, that step included).
+STOPPED_MESSAGE = (
+    "stopped at a needed step without a solution (stop_at_failure): {n} needed step(s) left "
+    "unsolved"
+)
 
 
 @dataclass(frozen=True)
@@ -169,6 +177,11 @@ class SteppedSinePredictor:
         self.branch_tolerance = branch_tolerance
         self._linear_key = None
         self._linear = None
+        #: Steps solved by stepping so far (every step of every pass, over all calls).
+        self.steps_solved = 0
+        #: Times each sweep (index among the needed ones) ended with a needed step unsolved:
+        #: the order ``stop_at_failure`` tries them in.
+        self._failed_sweeps: dict[int, int] = {}
 
     def _dof(self, asm, point: int, direction: str, what: str) -> int:
         if point not in self.model.points:
@@ -239,11 +252,23 @@ class SteppedSinePredictor:
         alt = solve_steps(pb, [w], F[:, None]).points[0]
         return alt if miss(alt) < m0 else p
 
+    def _sweep_order(self, sweeps: list[np.ndarray]) -> list[int]:
+        """Indices into ``sweeps`` (row arrays), likeliest to fail first: by how often each
+        failed in earlier calls, then by level (the contact's nonlinearity grows with it),
+        highest first."""
+        lv = self.data.levels_n[self.data.level_index]
+        return sorted(
+            range(len(sweeps)),
+            key=lambda i: (-self._failed_sweeps.get(i, 0), -float(np.max(lv[sweeps[i]])), i),
+        )
+
     def predict(
         self,
         values: Mapping[str, float] | None = None,
         params: Sequence[str] = (),
         rows: np.ndarray | None = None,
+        *,
+        stop_at_failure: bool = False,
     ) -> Prediction:
         """Model FRFs (and derivatives) at parameter ``values`` for the file's steps.
 
@@ -255,6 +280,12 @@ class SteppedSinePredictor:
             Parameters to differentiate with respect to.
         rows : ndarray of int, optional
             Only these steps (each sweep still solved in order up to its last needed step).
+        stop_at_failure : bool
+            Stop at the first needed step without a solution (a metric over the needed steps
+            is then ``inf`` whatever the others give): the steps not yet solved stay NaN and
+            unconverged. The sweeps are independent (each starts from its first step's linear
+            response), so they are then solved in the order likeliest to fail first
+            (:meth:`_sweep_order`); every step solved is the same as without it.
         """
         model = self.model.with_values(values) if values else self.model
         lin = self._linear_model(model)
@@ -275,27 +306,47 @@ class SteppedSinePredictor:
         power = np.array(self._power)[:, None]
         H_meas, _ = self.measured()
         k_frf = self._frf_k(pb)
-        for sweep in sweeps_of(d):
-            if not need[sweep].any():
-                continue
-            last = sweep[np.flatnonzero(need[sweep]).max()]
-            sweep = sweep[: np.flatnonzero(sweep == last)[0] + 1]
-            F = self._force_sign * self.drive_force[sweep]
-            X = None
-            H = len(self.orders)
-            for j, row in enumerate(sweep):
-                wk = 2 * np.pi * d.frequency_hz[row] * orders  # (H,)
-                factor = sign * (1j * wk[None, :]) ** power / F[j][None, :H] * self._force_sign
-                p = self._follow(pb, row, F[j], X, factor, H_meas[row])
-                if not out.mark(row, p, d.frequency_hz[row]):
-                    continue
-                X = p.X
-                out.frf[row] = p.q_out[k_frf].T * factor
-                if params and need[row]:
-                    sens = point_sensitivities(pb, p, list(params))
-                    for name in params:
-                        out.d_frf[name][row] = sens[name].d_outputs(k_frf).T * factor
+        sweeps = [s for s in sweeps_of(d) if need[s].any()]
+        order = self._sweep_order(sweeps) if stop_at_failure else range(len(sweeps))
+        for i in order:
+            if self._predict_sweep(out, pb, sweeps[i], need, params, orders, sign, power,
+                                   H_meas, k_frf, stop_at_failure):  # fmt: skip
+                self._failed_sweeps[i] = self._failed_sweeps.get(i, 0) + 1
+                if stop_at_failure:
+                    left = int((need & ~out.converged).sum())
+                    out.messages.append(STOPPED_MESSAGE.format(n=left))
+                    break
         return out
+
+    def _predict_sweep(self, out, pb, sweep, need, params, orders, sign, power, H_meas, k_frf,
+                       stop_at_failure) -> bool:  # fmt: skip
+        """Fill ``out`` with the steps of ``sweep`` (up to its last needed one); whether a
+        needed step failed (the sweep then ends there with ``stop_at_failure``)."""
+        d = self.data
+        failed = False
+        last = sweep[np.flatnonzero(need[sweep]).max()]
+        sweep = sweep[: np.flatnonzero(sweep == last)[0] + 1]
+        F = self._force_sign * self.drive_force[sweep]
+        X = None
+        H = len(self.orders)
+        for j, row in enumerate(sweep):
+            wk = 2 * np.pi * d.frequency_hz[row] * orders  # (H,)
+            factor = sign * (1j * wk[None, :]) ** power / F[j][None, :H] * self._force_sign
+            p = self._follow(pb, row, F[j], X, factor, H_meas[row])
+            self.steps_solved += 1
+            if not out.mark(row, p, d.frequency_hz[row]):
+                if need[row]:
+                    failed = True
+                    if stop_at_failure:
+                        return True
+                continue
+            X = p.X
+            out.frf[row] = p.q_out[k_frf].T * factor
+            if params and need[row]:
+                sens = point_sensitivities(pb, p, list(params))
+                for name in params:
+                    out.d_frf[name][row] = sens[name].d_outputs(k_frf).T * factor
+        return failed
 
 
 class ZeroStandardError(ValueError):

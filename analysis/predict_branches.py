@@ -23,15 +23,22 @@ fits better.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 
 import numpy as np
 
+from analysis.mhb import sweep as _sweep
 from analysis.mhb.continuation import ContinuationSettings, continue_branch
 from analysis.mhb.sensitivity import point_sensitivities
 from analysis.mhb.solver import solve_point
 from analysis.mhb.sweep import solve_steps
-from analysis.predict import Prediction, SteppedSinePredictor, needed_rows, sweeps_of
+from analysis.predict import (
+    STOPPED_MESSAGE,
+    Prediction,
+    SteppedSinePredictor,
+    needed_rows,
+    sweeps_of,
+)
 from analysis.system import build_problem_dofs
 
 __all__ = ["BranchMatchedPredictor"]
@@ -52,6 +59,50 @@ FOLD_STEPS = 2
 #: most this share of the frequency past the step.
 FOLD_WINDOW = 0.01
 FOLD_SEARCH = ContinuationSettings(ds=0.005, ds_max=0.02, max_points=80, stability=False)
+
+
+def _iter_steps(pb, omega, force, *, X0=None, max_substep_depth: int = 4) -> Iterator:
+    """The solutions of :func:`~analysis.mhb.sweep.solve_steps`, one step at a time.
+
+    The same steps, starts and fallbacks in the same order (so the same solutions, bit for bit,
+    and the same warning per failed step on the same logger), but yielded as they are solved:
+    a caller that needs no more of them (a prediction whose metric is already ``inf``) stops
+    there. ``omega`` (n,) and ``force`` (n, n_orders, n_f) as :func:`solve_steps` takes them.
+    ``tests/analysis/test_predict_early_exit.py`` checks the equality against it.
+    """
+    last = prev = last_force = None
+    X = X0
+    for i in range(len(omega)):
+        X_start = X
+        if prev is not None and last is not None and prev.omega != last.omega:
+            r = (omega[i] - last.omega) / (last.omega - prev.omega)
+            if 0 < r <= 2:
+                X_start = last.X + r * (last.X - prev.X)
+        p = _sweep.solve_point(pb, omega[i], force[i], X_start, None)
+        if not p.converged and X_start is not X:
+            p = _sweep.solve_point(pb, omega[i], force[i], X, None)
+        if not p.converged:
+            q = _sweep.solve_point(pb, omega[i], force[i], None, None)
+            if q.converged:
+                p = q
+        if not p.converged and last is not None:
+            for depth in range(1, max_substep_depth + 1):
+                p = _sweep._substep(
+                    pb, last.omega, last_force, last.X, omega[i], force[i], None, depth
+                )
+                if p.converged:
+                    break
+        if not p.converged:
+            q = _sweep._force_homotopy(pb, omega[i], force[i], None, 2**max_substep_depth)
+            if q.converged:
+                p = q
+        if not p.converged:
+            _sweep.log.warning(
+                "MHB step %d (%.4g Hz) did not converge: %s", i, omega[i] / (2 * np.pi), p.message
+            )
+        else:
+            prev, last, last_force, X = last, p, force[i], p.X
+        yield p
 
 
 def _jumps(fundamental: np.ndarray) -> np.ndarray:
@@ -140,7 +191,14 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         C = len(self._out_dofs)
         return point.outputs()[k, :C].T * factor, factor
 
-    def solve(self, model=None, extra_dofs: Sequence[int] = (), rows: np.ndarray | None = None):
+    def solve(
+        self,
+        model=None,
+        extra_dofs: Sequence[int] = (),
+        rows: np.ndarray | None = None,
+        *,
+        stop_at_failure: bool = False,
+    ):
         """Solutions of every needed step on the measured branch.
 
         Parameters
@@ -152,11 +210,22 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         rows : ndarray of int, optional
             Steps needed: each sweep is followed through those of its steps only (default:
             every step).
+        stop_at_failure : bool
+            Stop at the first needed step that ends without a solution on either branch (a
+            metric over the needed steps is then ``inf`` whatever the others give): the
+            sweeps not yet solved are left out of ``points``. A step is only given up once no
+            later stage can still solve it (the forward pass, then the backward pass over the
+            misfitting steps; the fold partners replace solved steps only), so the steps that
+            are returned, and whether any needed step failed, are those of a full solve. The
+            sweeps are independent (each starts from its first step's linear response), so
+            they are solved here in the order likeliest to fail first
+            (:meth:`~analysis.predict.SteppedSinePredictor._sweep_order`).
 
         Returns
         -------
         problem : HarmonicProblem
         points : dict row -> MHBPoint
+            In the file's order of the steps.
         """
         model = self.model if model is None else model
         key = (tuple(extra_dofs), None if rows is None else np.asarray(rows).tobytes())
@@ -167,49 +236,77 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         pb = self.problem(model, extra_dofs)
         d = self.data
         need = needed_rows(d.n_steps, rows)
+        sweeps = [s[need[s]] for s in sweeps_of(d) if need[s].any()]  # needed steps, in order
+        order = self._sweep_order(sweeps) if stop_at_failure else range(len(sweeps))
+        solved: dict[int, dict] = {}
+        stopped = False
+        for i in order:
+            solved[i], failed = self._solve_sweep(pb, sweeps[i], stop_at_failure)
+            if failed:
+                self._failed_sweeps[i] = self._failed_sweeps.get(i, 0) + 1
+                if stop_at_failure:
+                    stopped = True
+                    break
         out = {}
-        for sweep in sweeps_of(d):
-            if not need[sweep].any():
-                continue
-            sweep = sweep[need[sweep]]  # the needed steps only, in the test's order
-            F = self._force_sign * self.drive_force[sweep][:, :, None]
-            w = 2 * np.pi * d.frequency_hz[sweep]
-            points = solve_steps(pb, w, F, max_substep_depth=MAX_SUBSTEP_DEPTH).points
-            chosen = list(points)
-            frfs = [
-                self.frf_of(r, p)[0] if p.converged else None
-                for r, p in zip(sweep, points, strict=True)
+        for i in sorted(solved):
+            out.update(solved[i])
+        if not stopped:  # complete: the same solutions as without stop_at_failure
+            self._last = (model, key, (pb, out))
+        return pb, out
+
+    def _solve_sweep(self, pb, sweep: np.ndarray, stop_at_failure: bool) -> tuple[dict, bool]:
+        """Solutions (row -> MHBPoint) of the steps ``sweep`` (file rows, in the test's order)
+        on the measured branch, and whether one of them has none. With ``stop_at_failure``,
+        once a step is known to have none (no later stage can give it one), the others are
+        left unfinished and only that step is returned."""
+        self.steps_solved += sweep.size
+        F = self._force_sign * self.drive_force[sweep][:, :, None]
+        w = 2 * np.pi * self.data.frequency_hz[sweep]
+        points = solve_steps(pb, w, F, max_substep_depth=MAX_SUBSTEP_DEPTH).points
+        chosen = list(points)
+        frfs = [
+            self.frf_of(r, p)[0] if p.converged else None
+            for r, p in zip(sweep, points, strict=True)
+        ]
+        fits = np.array(
+            [
+                np.inf if f is None else self._step_misfit(f, r)
+                for r, f in zip(sweep, frfs, strict=True)
             ]
-            fits = np.array(
-                [
-                    np.inf if f is None else self._step_misfit(f, r)
-                    for r, f in zip(sweep, frfs, strict=True)
-                ]
-            )
-            rel = np.array(
-                [
-                    np.inf if f is None else self._step_relative(f, r)
-                    for r, f in zip(sweep, frfs, strict=True)
-                ]
-            )
-            bad = np.flatnonzero((fits > SUSPECT_SIGMA) & (rel > SUSPECT_RELATIVE))
-            if self.match_branches and bad.size:
-                lo, hi = bad.min(), min(bad.max() + 1, sweep.size - 1)
-                seg = np.arange(hi, lo - 1, -1)
-                X0 = points[hi].X if points[hi].converged and hi > bad.max() else None
+        )
+        rel = np.array(
+            [
+                np.inf if f is None else self._step_relative(f, r)
+                for r, f in zip(sweep, frfs, strict=True)
+            ]
+        )
+        bad = np.flatnonzero((fits > SUSPECT_SIGMA) & (rel > SUSPECT_RELATIVE))
+        if self.match_branches and bad.size:
+            lo, hi = bad.min(), min(bad.max() + 1, sweep.size - 1)
+            seg = np.arange(hi, lo - 1, -1)
+            X0 = points[hi].X if points[hi].converged and hi > bad.max() else None
+            if stop_at_failure:
+                back = _iter_steps(pb, w[seg], F[seg], X0=X0, max_substep_depth=MAX_SUBSTEP_DEPTH)
+            else:
                 back = solve_steps(
                     pb, w[seg], F[seg], X0=X0, max_substep_depth=MAX_SUBSTEP_DEPTH
                 ).points
-                for j, p in zip(seg, back, strict=True):
-                    if p.converged:
-                        self._keep_better(sweep[j], p, j, chosen, fits)
-            if self.match_branches:
-                for j in self._before_jumps(sweep, frfs, fits):
-                    for p in self._fold_partners(pb, points[j].X, w[j], w[j - 1], F[j]):
-                        self._keep_better(sweep[j], p, j, chosen, fits)
-            out.update(zip(sweep.tolist(), chosen, strict=True))
-        self._last = (model, key, (pb, out))
-        return pb, out
+            for j, p in zip(seg, back, strict=False):
+                self.steps_solved += 1
+                if p.converged:
+                    self._keep_better(sweep[j], p, j, chosen, fits)
+                elif stop_at_failure and not chosen[j].converged:
+                    # unsolved both ways; the fold partners replace solved steps only
+                    return {int(sweep[j]): chosen[j]}, True
+        failed = not all(p.converged for p in chosen)
+        if stop_at_failure and failed:
+            j = next(j for j, p in enumerate(chosen) if not p.converged)
+            return {int(sweep[j]): chosen[j]}, True
+        if self.match_branches:
+            for j in self._before_jumps(sweep, frfs, fits):
+                for p in self._fold_partners(pb, points[j].X, w[j], w[j - 1], F[j]):
+                    self._keep_better(sweep[j], p, j, chosen, fits)
+        return dict(zip(sweep.tolist(), chosen, strict=True)), failed
 
     def _keep_better(self, row: int, p, j: int, chosen: list, fits: np.ndarray) -> None:
         """Take solution ``p`` at position ``j`` (file step ``row``) if it fits better."""
@@ -329,9 +426,14 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         values: Mapping[str, float] | None = None,
         params: Sequence[str] = (),
         rows: np.ndarray | None = None,
+        *,
+        stop_at_failure: bool = False,
     ) -> Prediction:
-        """Model FRFs (and derivatives) on the measured branch; see the base class."""
-        return self.predict_with_sigma(values, params, rows, sigma=False)[0]
+        """Model FRFs (and derivatives) on the measured branch; see the base class (and
+        :meth:`solve` for ``stop_at_failure``)."""
+        return self.predict_with_sigma(
+            values, params, rows, sigma=False, stop_at_failure=stop_at_failure
+        )[0]
 
     def predict_with_sigma(
         self,
@@ -340,11 +442,12 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         rows: np.ndarray | None = None,
         *,
         sigma: bool = True,
+        stop_at_failure: bool = False,
     ) -> tuple[Prediction, np.ndarray | None]:
         """:meth:`predict` and, with ``sigma``, the residuals' standard errors of
         :meth:`response_sigma` at the same solutions."""
         model = self.model.with_values(values) if values else self.model
-        pb, points = self.solve(model, rows=rows)
+        pb, points = self.solve(model, rows=rows, stop_at_failure=stop_at_failure)
         d = self.data
         C = len(self.channel_indices)
         out = Prediction.empty((d.n_steps, C, len(self.compared)), params)
@@ -359,5 +462,8 @@ class BranchMatchedPredictor(SteppedSinePredictor):
                     out.d_frf[name][row] = (
                         sens[name].d_outputs(pb.order_k[self.compared])[:, :C].T * factor
                     )
+        left = np.flatnonzero(need & ~np.isin(np.arange(d.n_steps), list(points)))
+        if left.size:  # stop_at_failure stopped at a step without a solution
+            out.messages.append(STOPPED_MESSAGE.format(n=left.size))
         sig = self.response_sigma(pb, points) if sigma else None
         return out, sig

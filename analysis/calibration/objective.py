@@ -11,6 +11,7 @@ says why), never floored nor silently unweighted.
 
 from __future__ import annotations
 
+import inspect
 import logging
 
 import numpy as np
@@ -84,6 +85,13 @@ class FRFObjective:
             self._weight = np.sqrt(2) / self.sigma
         self.weighting = weighting
         self.n_evaluations = 0
+        try:
+            accepts = "stop_at_failure" in inspect.signature(predictor.predict).parameters
+        except (TypeError, ValueError):  # pragma: no cover - a predict without a signature
+            accepts = False
+        #: :meth:`cost` stops a prediction at its first selected step without a solution
+        #: (where the predictor can: ``predict(..., stop_at_failure=True)``).
+        self.stop_at_failure = accepts
 
     @property
     def n_residuals(self) -> int:
@@ -99,12 +107,16 @@ class FRFObjective:
         Residuals are NaN where a step of the selection did not converge (an infeasible point
         for the optimiser), and for parameter values the elements refuse (e.g. a negative gap).
         """
+        return self._evaluate(theta, want_jac, stop_at_failure=False)
+
+    def _evaluate(self, theta: np.ndarray, want_jac: bool, stop_at_failure: bool):
         self.n_evaluations += 1
         sp = self.space
         p = sp.to_physical(theta)
+        kw = {"stop_at_failure": True} if stop_at_failure else {}
         try:
             pred = self.predictor.predict(
-                sp.as_dict(p), sp.names if want_jac else (), rows=self.rows
+                sp.as_dict(p), sp.names if want_jac else (), rows=self.rows, **kw
             )
         except ValueError as exc:
             log.debug("infeasible parameters %s: %s", p, exc)
@@ -128,7 +140,14 @@ class FRFObjective:
         r = self._stack(pred.frf - self.H)
         return 0.5 * float(r @ r)
 
-    def cost(self, theta: np.ndarray) -> float:
-        """``delta / 2`` at ``theta`` (``inf`` where infeasible)."""
-        r, _ = self(theta, False)
+    def cost(self, theta: np.ndarray, stop_at_failure: bool | None = None) -> float:
+        """``delta / 2`` at ``theta`` (``inf`` where infeasible).
+
+        The cost is ``inf`` as soon as one selected step has no solution, so the prediction
+        stops there (``stop_at_failure``, default :attr:`stop_at_failure`: where the predictor
+        can): a start far from the data costs a part of a prediction, and every cost is the
+        same, bit for bit, as without it.
+        """
+        stop = self.stop_at_failure if stop_at_failure is None else stop_at_failure
+        r, _ = self._evaluate(theta, False, stop)
         return 0.5 * float(r @ r) if np.all(np.isfinite(r)) else np.inf
