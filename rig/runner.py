@@ -166,6 +166,9 @@ class RunSummary:
         Wall-clock and DAQ-clock duration of this run [s].
     fault_kind : str
     interrupted : bool
+    output_at_zero : bool
+        Whether the final ramp of the output to 0 V completed (false: the output may still be
+        driven; ``message`` names the error).
     """
 
     path: Path
@@ -183,12 +186,15 @@ class RunSummary:
     rig_time_s: float
     fault_kind: str = ""
     interrupted: bool = False
+    output_at_zero: bool = True
 
     def lines(self) -> list[str]:
         """A one-screen summary."""
         out = [f"run       {self.plan_name} ({self.kind}): {self.status}"]
         if self.message:
             out.append(f"ended     {self.message}")
+        if not self.output_at_zero:
+            out.append("OUTPUT    the ramp to 0 V failed: the output may not be at 0 V")
         out.append(f"file      {self.path}")
         if self.kind == "stepped-sine":
             out.append(
@@ -258,6 +264,7 @@ def summarize(
         rig_time_s=outcome.rig_time_s if outcome else 0.0,
         fault_kind=outcome.fault_kind if outcome else "",
         interrupted=outcome.interrupted if outcome else False,
+        output_at_zero=outcome.output_at_zero if outcome else True,
     )
 
 
