@@ -30,6 +30,7 @@ import numpy as np
 from analysis.measurement_file import (
     SteppedSineData,
     create_stepped_sine,
+    note_output_not_at_zero,
     open_for_resume,
     read_measurement,
     write_random,
@@ -483,7 +484,7 @@ class TestRun:
                 writer.finish("failed", f"{type(exc).__name__}: {exc}")
             raise
         with deferred_interrupts():
-            writer.finish(outcome.status, outcome.message)
+            writer.finish(outcome.status, outcome.message, outcome.output_at_zero)
         return outcome
 
     def _execute_random(self) -> RunOutcome:
@@ -493,4 +494,8 @@ class TestRun:
         procedure = random_procedure(self.plan)
         if self.procedure_wrapper is not None:
             procedure = self.procedure_wrapper(procedure)
-        return self.engine.run(procedure, _RandomSink(self))
+        outcome = self.engine.run(procedure, _RandomSink(self))
+        if not outcome.output_at_zero and self.path.exists():
+            with deferred_interrupts():
+                note_output_not_at_zero(self.path, outcome.message)
+        return outcome
