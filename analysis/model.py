@@ -211,7 +211,15 @@ class Model:
             doc = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise ModelFileError(source, "", f"invalid TOML: {exc}") from None
-        model = cls(**parse_document(doc, source, allow_truth=allow_truth))
+        try:
+            model = cls(**parse_document(doc, source, allow_truth=allow_truth))
+        except (ArithmeticError, np.linalg.LinAlgError) as exc:
+            raise ModelFileError(
+                source,
+                "",
+                f"the model cannot be built ({type(exc).__name__}: {exc}); check "
+                "for extreme values (coordinates, sections, materials, springs)",
+            ) from None
         model.check_elements()
         model.warn_out_of_bounds()
         return model

@@ -33,6 +33,8 @@ __all__ = [
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 NODE_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")
 RESERVED = ("rigid", "free")
+MAX_COORDINATE_M = 1e4
+"""Largest coordinate accepted [m] (a structure on a test rig; larger values are typos)."""
 _TOP_KEYS = {
     "title", "nodes", "sections", "materials", "members", "joints", "springs", "masses",
     "supports", "points", "parameters", "nonlinear", "damping", "linear_part", "truth",
@@ -225,6 +227,12 @@ class _Reader:
             self.fail(path, f"expected a finite number, got {value!r}")
         return x
 
+    def coordinate(self, value: Any, path: str) -> float:
+        x = self.finite(value, path)
+        if abs(x) > MAX_COORDINATE_M:
+            self.fail(path, f"a coordinate [m] within +-{MAX_COORDINATE_M:g}, got {value!r}")
+        return x
+
     def text(self, value: Any, path: str) -> str:
         if not isinstance(value, str):
             self.fail(path, f"expected a string, got {value!r}")
@@ -303,7 +311,7 @@ def _frame(r: _Reader, doc: dict) -> FrameSpec:
         xy = r.array(xy, f"nodes.{name}")
         if len(xy) != 2:
             r.fail(f"nodes.{name}", f"expected [x, y] in m, got {xy!r}")
-        nodes[name] = tuple(r.finite(v, f"nodes.{name}[{k}]") for k, v in enumerate(xy))
+        nodes[name] = tuple(r.coordinate(v, f"nodes.{name}[{k}]") for k, v in enumerate(xy))
     sections = {
         n: _section(r, r.table(t, f"sections.{n}"), f"sections.{n}")
         for n, t in r.table(doc.get("sections", {}), "sections").items()
@@ -416,7 +424,7 @@ def _points(r: _Reader, doc: dict, dirs: tuple[str, ...]) -> dict[int, Measureme
             xy = r.array(xy, f"{p}.xy")
             if len(xy) != 2:
                 r.fail(f"{p}.xy", f"expected [x, y] in m, got {xy!r}")
-            xy = tuple(r.finite(v, f"{p}.xy[{k}]") for k, v in enumerate(xy))
+            xy = tuple(r.coordinate(v, f"{p}.xy[{k}]") for k, v in enumerate(xy))
         if "node" not in t and xy is None:
             r.fail(p, "give a node or xy")
         node = r.text(t.get("node", ""), f"{p}.node")
@@ -455,8 +463,10 @@ def _groups(doc: dict) -> dict[str, str]:
     """``"nonlinear"`` for parameter names used by nonlinear elements (the default group of a
     parameter without an explicit ``group``; all others default to ``"linear"``)."""
     used = {}
-    for t in doc.get("nonlinear", []):
-        for v in (t.get("params", {}) if isinstance(t, dict) else {}).values():
+    specs = doc.get("nonlinear", [])
+    for t in specs if isinstance(specs, list) else ():
+        params = t.get("params", {}) if isinstance(t, dict) else {}
+        for v in params.values() if isinstance(params, dict) else ():
             if isinstance(v, str):
                 used[v] = "nonlinear"
     return used
