@@ -38,7 +38,7 @@ from analysis.measurement_file import (
 from rig.backends import open_backend
 from rig.engine import Procedure, RunEngine, RunOutcome
 from rig.events import EventBus, RunStarted
-from rig.lock import DeviceLock
+from rig.lock import DeviceLock, user_lock_dir
 from rig.plans import Plan, RandomPlan, SteppedSinePlan, plan_from_dict
 from rig.run_random import random_procedure
 from rig.run_stepped import stepped_sine_procedure
@@ -87,7 +87,8 @@ def open_rig(
         Passed to the backend (``truth``, ``seed``, ``realtime``, ... for ``sim``); ``ni`` gets
         the setup's device unless given.
     lock_dir : path, optional
-        Directory of the device locks.
+        Directory of the device locks (default: the machine-wide one of :mod:`rig.lock` for a
+        real device, the per-user one for a simulated device).
     amplifier_port : str, optional
         Serial port of the amplifier (default the setup's; "" for none).
 
@@ -100,6 +101,8 @@ def open_rig(
         ``--backend sim``).
     """
     name = lock_name(backend, setup)
+    if lock_dir is None and backend != "ni":
+        lock_dir = user_lock_dir()  # a simulated device is one per process, not per machine
     with DeviceLock(name, lock_dir):
         options = dict(backend_options or {})
         if backend == "ni":
