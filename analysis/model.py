@@ -18,6 +18,7 @@ import logging
 import math
 import re
 import tomllib
+import warnings
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -51,10 +52,16 @@ __all__ = [
     "ModelFileError",
     "NonlinearSpec",
     "Parameter",
+    "ParameterBoundsWarning",
     "load_model",
 ]
 
 log = logging.getLogger(__name__)
+
+
+class ParameterBoundsWarning(UserWarning):
+    """A model file gives a parameter a value outside its calibration bounds."""
+
 
 REFERENCE_RIG = Path(__file__).parent / "models" / "clearance_rig.toml"
 _CACHE_SIZE = 16
@@ -204,7 +211,67 @@ class Model:
             doc = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise ModelFileError(source, "", f"invalid TOML: {exc}") from None
-        return cls(**parse_document(doc, source, allow_truth=allow_truth))
+        try:
+            model = cls(**parse_document(doc, source, allow_truth=allow_truth))
+        except (ArithmeticError, np.linalg.LinAlgError) as exc:
+            raise ModelFileError(
+                source,
+                "",
+                f"the model cannot be built ({type(exc).__name__}: {exc}); check "
+                "for extreme values (coordinates, sections, materials, springs)",
+            ) from None
+        model.check_elements()
+        model.warn_out_of_bounds()
+        return model
+
+    def check_elements(self) -> None:
+        """Build every nonlinear element once at the current values, so that an unknown kind, an
+        unknown or missing element parameter, a bad option or a value the element refuses (a
+        negative ``k_c``) is reported when the file is loaded, not at the first simulation.
+
+        Raises
+        ------
+        ModelFileError
+            Naming ``nonlinear[i].kind``, ``nonlinear[i].params.<name>`` (and the model
+            parameter it refers to) or ``nonlinear[i]``.
+        """
+        values = self.values()
+        for i, spec in enumerate(self.nonlinear):
+            try:
+                self.build_elements_of((spec,))
+            except ModelFileError as exc:
+                path, problem = exc.path.replace("nonlinear[0]", f"nonlinear[{i}]"), exc.problem
+                m = re.search(r"parameter\(?s?\)? \[?'(\w+)'", problem)
+                if path == f"nonlinear[{i}]" and m and m.group(1) in spec.params:
+                    key = m.group(1)
+                    path = f"nonlinear[{i}].params.{key}"
+                    ref = spec.params[key]
+                    if isinstance(ref, str):
+                        problem = f"{problem} (parameters.{ref}.value = {values[ref]!r})"
+                elif path == f"nonlinear[{i}]" and m and "unknown" in problem:
+                    path = f"nonlinear[{i}].params.{m.group(1)}"
+                raise ModelFileError(self.source, path, problem) from None
+
+    def warn_out_of_bounds(self) -> list[str]:
+        """Warn (:class:`ParameterBoundsWarning`) for every parameter whose value lies outside
+        its ``lower``/``upper`` bounds: allowed (a calibrated value may be given), but said.
+
+        Returns
+        -------
+        list of str
+            The warnings issued.
+        """
+        out = []
+        for name, p in self.parameters.items():
+            if not p.lower <= p.value <= p.upper:
+                text = (
+                    f"{self.source}: parameters.{name}.value: {p.value!r} is outside its bounds "
+                    f"[{p.lower!r}, {p.upper!r}]"
+                )
+                warnings.warn(text, ParameterBoundsWarning, stacklevel=3)
+                log.warning("%s", text)
+                out.append(text)
+        return out
 
     def _validate(self) -> None:
         object.__setattr__(self, "parameters", dict(self.parameters))
@@ -374,13 +441,17 @@ class Model:
         ModelFileError
             Naming ``nonlinear[i]`` for an unknown kind or bad parameters or options.
         """
+        return self.build_elements_of(self.nonlinear)
+
+    def build_elements_of(self, specs) -> list[tuple[NonlinearSpec, Any]]:
+        """:meth:`build_elements` for the given specs (errors name their index in ``specs``)."""
         import analysis.elements  # noqa: F401  (importing the library fills the registry)
 
         from .elements.base import ELEMENT_TYPES, make_element
 
         values = self.values()
         out = []
-        for i, spec in enumerate(self.nonlinear):
+        for i, spec in enumerate(specs):
             if spec.kind not in ELEMENT_TYPES:
                 raise ModelFileError(
                     self.source, f"nonlinear[{i}].kind",

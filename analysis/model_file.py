@@ -33,6 +33,8 @@ __all__ = [
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 NODE_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")
 RESERVED = ("rigid", "free")
+MAX_COORDINATE_M = 1e4
+"""Largest coordinate accepted [m] (a structure on a test rig; larger values are typos)."""
 _TOP_KEYS = {
     "title", "nodes", "sections", "materials", "members", "joints", "springs", "masses",
     "supports", "points", "parameters", "nonlinear", "damping", "linear_part", "truth",
@@ -219,13 +221,25 @@ class _Reader:
             self.fail(path, f"expected a number, got {value!r}")
         return float(value)
 
+    def finite(self, value: Any, path: str) -> float:
+        x = self.number(value, path)
+        if not math.isfinite(x):
+            self.fail(path, f"expected a finite number, got {value!r}")
+        return x
+
+    def coordinate(self, value: Any, path: str) -> float:
+        x = self.finite(value, path)
+        if abs(x) > MAX_COORDINATE_M:
+            self.fail(path, f"a coordinate [m] within +-{MAX_COORDINATE_M:g}, got {value!r}")
+        return x
+
     def text(self, value: Any, path: str) -> str:
         if not isinstance(value, str):
             self.fail(path, f"expected a string, got {value!r}")
         return value
 
     def coef(self, value: Any, path: str) -> float | str:
-        return value if isinstance(value, str) else self.number(value, path)
+        return value if isinstance(value, str) else self.finite(value, path)
 
     def direction(self, value: Any, path: str, allowed: tuple[str, ...] = DIRECTIONS) -> str:
         if value not in allowed:
@@ -248,7 +262,7 @@ def _section(r: _Reader, t: dict, path: str) -> Section:
     shape = r.text(t.get("shape", "general"), f"{path}.shape")
     keys = {"b": "b_m", "h": "h_m", "outer": "outer_m", "wall": "wall_m"}
     keys |= {"A": "area_m2", "I": "inertia_m4"}
-    kw = {keys[k]: r.number(v, f"{path}.{k}") for k, v in t.items() if k != "shape"}
+    kw = {keys[k]: r.finite(v, f"{path}.{k}") for k, v in t.items() if k != "shape"}
     return r.build(Section, path, shape=shape, **kw)
 
 
@@ -260,7 +274,7 @@ def _member(r: _Reader, t: dict, path: str, i: int) -> Member:
     if elements is not None and (isinstance(elements, bool) or not isinstance(elements, int)):
         r.fail(f"{path}.elements", f"expected an integer, got {elements!r}")
     max_len = t.get("max_element_length")
-    max_len = None if max_len is None else r.number(max_len, f"{path}.max_element_length")
+    max_len = None if max_len is None else r.finite(max_len, f"{path}.max_element_length")
     return r.build(
         Member, path,
         name=r.text(t.get("name", f"m{i}"), f"{path}.name"),
@@ -297,7 +311,7 @@ def _frame(r: _Reader, doc: dict) -> FrameSpec:
         xy = r.array(xy, f"nodes.{name}")
         if len(xy) != 2:
             r.fail(f"nodes.{name}", f"expected [x, y] in m, got {xy!r}")
-        nodes[name] = tuple(r.number(v, f"nodes.{name}") for v in xy)
+        nodes[name] = tuple(r.coordinate(v, f"nodes.{name}[{k}]") for k, v in enumerate(xy))
     sections = {
         n: _section(r, r.table(t, f"sections.{n}"), f"sections.{n}")
         for n, t in r.table(doc.get("sections", {}), "sections").items()
@@ -402,7 +416,7 @@ def _points(r: _Reader, doc: dict, dirs: tuple[str, ...]) -> dict[int, Measureme
     points = {}
     for key, t in r.table(doc.get("points", {}), "points").items():
         p = f"points.{key}"
-        if not key.isdigit() or int(key) < 1:
+        if not (key.isascii() and key.isdigit()) or int(key) < 1:
             r.fail(p, "point numbers are positive integers")
         r.table(t, p, {"node", "direction", "xy"})
         xy = t.get("xy")
@@ -410,7 +424,7 @@ def _points(r: _Reader, doc: dict, dirs: tuple[str, ...]) -> dict[int, Measureme
             xy = r.array(xy, f"{p}.xy")
             if len(xy) != 2:
                 r.fail(f"{p}.xy", f"expected [x, y] in m, got {xy!r}")
-            xy = tuple(r.number(v, f"{p}.xy") for v in xy)
+            xy = tuple(r.coordinate(v, f"{p}.xy[{k}]") for k, v in enumerate(xy))
         if "node" not in t and xy is None:
             r.fail(p, "give a node or xy")
         node = r.text(t.get("node", ""), f"{p}.node")
@@ -441,7 +455,7 @@ def _linear_part(r: _Reader, t: dict, base: Path) -> LinearPartSpec:
     elif fmt == "mtx":
         r.fail("linear_part.dof_map", "missing (a file name or a list of 'node/direction')")
     masses = r.table(t.get("masses", {}), "linear_part.masses")
-    masses = {n: r.number(m, f"linear_part.masses.{n}") for n, m in masses.items()}
+    masses = {n: r.finite(m, f"linear_part.masses.{n}") for n, m in masses.items()}
     return LinearPartSpec(format=fmt, files=files, dof_map=dof_map, masses=masses)
 
 
@@ -449,8 +463,10 @@ def _groups(doc: dict) -> dict[str, str]:
     """``"nonlinear"`` for parameter names used by nonlinear elements (the default group of a
     parameter without an explicit ``group``; all others default to ``"linear"``)."""
     used = {}
-    for t in doc.get("nonlinear", []):
-        for v in (t.get("params", {}) if isinstance(t, dict) else {}).values():
+    specs = doc.get("nonlinear", [])
+    for t in specs if isinstance(specs, list) else ():
+        params = t.get("params", {}) if isinstance(t, dict) else {}
+        for v in params.values() if isinstance(params, dict) else ():
             if isinstance(v, str):
                 used[v] = "nonlinear"
     return used
@@ -492,12 +508,12 @@ def parse_document(doc: dict, source: str, *, allow_truth: bool = False) -> dict
     damping = r.table(doc.get("damping", {}), "damping", {"default_zeta", "per_mode"})
     per_mode = r.table(damping.get("per_mode", {}), "damping.per_mode")
     for k in per_mode:
-        if not k.isdigit():
+        if not (k.isascii() and k.isdigit()):
             r.fail(f"damping.per_mode.{k}", "mode numbers are positive integers")
     damping = r.build(
         DampingSpec, "damping",
-        default_zeta=r.number(damping.get("default_zeta", 0.01), "damping.default_zeta"),
-        per_mode={int(k): r.number(v, f"damping.per_mode.{k}") for k, v in per_mode.items()},
+        default_zeta=r.finite(damping.get("default_zeta", 0.01), "damping.default_zeta"),
+        per_mode={int(k): r.finite(v, f"damping.per_mode.{k}") for k, v in per_mode.items()},
     )  # fmt: skip
     nonlinear = tuple(
         _nonlinear(r, r.table(t, f"nonlinear[{i}]"), f"nonlinear[{i}]", dirs)

@@ -116,6 +116,8 @@ def _backend_options(args, setup) -> dict[str, Any]:
                 raise UsageError(f"{flag} applies to --backend sim only")
         if args.realtime:
             raise UsageError("--realtime applies to --backend sim only")
+        if getattr(args, "fault", None):
+            raise UsageError("--fault applies to --backend sim only (faults of the simulated rig)")
         return {}
     options: dict[str, Any] = {"truth": args.truth or "reference"}
     if args.seed is not None:
@@ -124,6 +126,47 @@ def _backend_options(args, setup) -> dict[str, Any]:
         options["realtime"] = True
     options["sensor_masses_kg"] = setup.sensor_masses_kg()
     return options
+
+
+def _sim_faults(args, setup) -> list:
+    """The ``--fault`` arguments, parsed and checked against the setup's channels."""
+    from rig.faults import parse_sim_fault
+
+    faults = []
+    names = [c.name for c in setup.channels]
+    for text in getattr(args, "fault", None) or ():
+        try:
+            fault = parse_sim_fault(text)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+        if fault.channel and fault.channel not in names:
+            raise UsageError(
+                f"--fault {text!r}: no channel {fault.channel!r} in the setup; channels: "
+                + ", ".join(names)
+            )
+        faults.append(fault)
+    return faults
+
+
+def _schedule_faults(backend, bus, faults) -> None:
+    """Switch each fault on in the simulated DAQ from its step of the run on."""
+    from rig.events import StepFinished
+    from rig.faults import switch_on
+
+    def due(step: int) -> list:
+        return [f for f in faults if f.from_step == step]
+
+    if due(1):
+        backend.set_faults(switch_on(backend.faults, due(1)))
+    finished = [0]
+
+    def on_event(event) -> None:
+        if isinstance(event, StepFinished):
+            finished[0] += 1
+            if now := due(finished[0] + 1):
+                backend.set_faults(switch_on(backend.faults, now))
+
+    bus.subscribe(on_event)
 
 
 def _run(args, kind: str) -> int:
@@ -158,6 +201,7 @@ def _run(args, kind: str) -> int:
         setup = setup or load_setup(plan.setup)
         out = Path(args.out)
     options = _backend_options(args, setup)
+    faults = _sim_faults(args, setup)
     if not getattr(args, "verbose", False):
         logging.getLogger("rig").setLevel(logging.ERROR)  # the progress printer shows warnings
     info = {"backend": args.backend, "backend_options": _jsonable(options), "argv": sys.argv[1:]}
@@ -175,6 +219,8 @@ def _run(args, kind: str) -> int:
         else:
             run = TestRun(rig.backend, plan, setup, out, overwrite=args.overwrite, **common)
         run.engine.bus.subscribe(printer)
+        if faults:
+            _schedule_faults(rig.backend, run.engine.bus, faults)
         with interrupt_handlers(run.engine.abort):
             summary = run.execute()
     printer.close()
@@ -242,6 +288,14 @@ def _add_rig_options(sp: argparse.ArgumentParser, default_out: str) -> None:
     )
     sp.add_argument("--seed", type=int, help="simulated rig: noise seed")
     sp.add_argument("--realtime", action="store_true", help="simulated rig: pace to the clock")
+    sp.add_argument(
+        "--fault",
+        action="append",
+        metavar="SPEC",
+        help="simulated rig: switch a fault on, [CHANNEL:]KIND[=LEVEL][@stepN] (repeatable), "
+        "e.g. acc7:disconnect@step3, acc7:clip=12@step2, read-timeout@step2, "
+        "amplifier-overload; kinds: disconnect, clip, read-timeout, amplifier-overload",
+    )
     sp.add_argument("--amplifier-port", help="serial port of the amplifier (overrides the setup)")
     sp.add_argument("--lock-dir", help="directory of the device locks")
     sp.add_argument("--overwrite", action="store_true", help="replace an existing --out file")

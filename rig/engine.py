@@ -9,7 +9,9 @@ Whatever way the run ends, the engine ramps the output to 0 V (the backend's ``s
 mutes the amplifier if it controls one: on success, on an abort (the operator, a signal, an
 abort limit), on a fault, on a DAQ error, on an exception in the procedure, on Ctrl-C. The
 outcome (:class:`RunOutcome`) says how the run ended, in words for the file's
-``exit_message``.
+``exit_message``, and whether the ramp to 0 V (and the amplifier's mute) actually completed:
+when ``stop()`` raises, the message names the error and says the output may not be at 0 V
+(never "Output ramped to 0 V").
 
 Pause, resume and abort may be called from any thread. A pause takes effect at the next block
 (at most ``read_chunk_s`` of data later): the output ramps to 0 V and the run waits; on resume
@@ -102,6 +104,9 @@ class RunOutcome:
         Acquisition time on the DAQ clock (samples read / sample rate) [s].
     wall_s : float
         Wall-clock duration [s].
+    output_at_zero : bool
+        Whether the final ramp of the output to 0 V (the backend's ``stop()``) completed; when
+        it did not, ``message`` names the error and says the output may not be at 0 V.
     """
 
     status: str
@@ -111,6 +116,7 @@ class RunOutcome:
     steps_written: int = 0
     rig_time_s: float = 0.0
     wall_s: float = 0.0
+    output_at_zero: bool = True
 
 
 class _Restart(Exception):
@@ -199,6 +205,7 @@ class RunEngine:
         self._checks: SignalChecks | None = None
         self._sink: Any = None
         self._amp_warned = False
+        self._mute_error = ""
 
     # ------------------------------------------------------------------ control (any thread)
     @property
@@ -250,6 +257,7 @@ class RunEngine:
         self._state = "running"
         self._steps_written = 0
         self._samples_read = 0
+        self._mute_error = ""
         t0 = time.monotonic()
         status, message, kind, interrupted = "success", "", "", False
         gen = None
@@ -283,9 +291,19 @@ class RunEngine:
             logger.exception("run failed")
         finally:
             with deferred_interrupts():
-                self._shutdown(gen)
-        if status != "success":
+                stop_error = self._shutdown(gen)
+        if stop_error:
+            ending = (
+                f"Ramping the output to 0 V FAILED ({stop_error}): the output may not be at 0 V, "
+                "check the amplifier and the DAQ output"
+            )
+            message = f"{message}. {ending}" if message else ending
+            message = f"{message}; {self._steps_written} step(s) written"
+        elif status != "success":
             message = f"{message}. Output ramped to 0 V; {self._steps_written} step(s) written"
+        if self._mute_error:
+            ending = f"muting the amplifier FAILED ({self._mute_error})"
+            message = f"{message}; {ending}" if message else ending
         outcome = RunOutcome(
             status,
             message,
@@ -294,9 +312,11 @@ class RunEngine:
             self._steps_written,
             self._samples_read / self._fs if self._fs == self._fs else 0.0,
             time.monotonic() - t0,
+            not stop_error,
         )
         self._state = "finished"
-        log = logger.info if status == "success" else logger.warning
+        clean = status == "success" and not stop_error and not self._mute_error
+        log = logger.info if clean else logger.warning
         log("run ended: %s %s", status, message)
         self.publish(RunFinished(status, message))
         return outcome
@@ -329,22 +349,27 @@ class RunEngine:
                 pass  # paused and resumed between commands: the drive in force is back
             result = self._execute(command)
 
-    def _shutdown(self, gen) -> None:
+    def _shutdown(self, gen) -> str:
+        """Ramp down, mute, close the procedure; returns why the ramp to 0 V failed, or ""."""
         self._pause.clear()
+        stop_error = ""
         try:
             self.backend.stop()
-        except Exception:
+        except Exception as exc:
             logger.exception("ramping the output down failed")
+            stop_error = f"{type(exc).__name__}: {exc}"
         if self.amplifier is not None:
             try:
                 self.amplifier.mute()
-            except Exception:
+            except Exception as exc:
                 logger.exception("muting the amplifier failed")
+                self._mute_error = f"{type(exc).__name__}: {exc}"
         if gen is not None:
             try:
                 gen.close()
             except Exception:
                 logger.exception("closing the procedure failed")
+        return stop_error
 
     # ------------------------------------------------------------------ commands
     def _execute(self, command: Any) -> Any:

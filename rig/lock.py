@@ -6,8 +6,19 @@ open a DAQ device, so two programs never drive the same shaker. The lock is ``fc
 exits (a crash or ``kill -9`` leaves no stale lock). The file holds the owner's PID, command
 line and start time, which a second would-be owner sees in its error message.
 
-Lock directory, first that applies: the ``lock_dir`` argument, the ``RIG_LOCK_DIR`` environment
-variable, ``$XDG_RUNTIME_DIR/clearance-rig``, ``~/.cache/clearance-rig/locks``.
+Lock directory, first that applies: the ``lock_dir`` argument (``--lock-dir``), the
+``RIG_LOCK_DIR`` environment variable, else one directory that every process on the machine sees,
+whoever runs it and whatever its environment: ``/run/lock/clearance-rig`` (``/var/lock``, then
+``/tmp`` where there is no ``/run/lock``). A per-user directory would let two users, or two
+environments of one user, drive the same shaker at once. The directory is made world-writable
+with the sticky bit (like ``/tmp``: anyone may create a lock file, nobody may delete another's),
+and lock files are readable and writable by all, so that any user can take a free device and see
+who holds a busy one. Lock files are opened without ``O_CREAT`` when they exist, which
+``fs.protected_regular`` would refuse for another user's file in a sticky directory.
+
+Simulated devices exist once per process, not once per machine: :func:`rig.runner.open_rig`
+locks them in :func:`user_lock_dir` (``RIG_LOCK_DIR``, ``$XDG_RUNTIME_DIR/clearance-rig`` or
+``~/.cache/clearance-rig/locks``) so that two users can each run the simulator.
 """
 
 from __future__ import annotations
@@ -22,7 +33,7 @@ import time
 from pathlib import Path
 from types import TracebackType
 
-__all__ = ["DeviceBusyError", "DeviceLock", "default_lock_dir", "lock_holder"]
+__all__ = ["DeviceBusyError", "DeviceLock", "default_lock_dir", "lock_holder", "user_lock_dir"]
 
 logger = logging.getLogger(__name__)
 
@@ -54,8 +65,27 @@ class DeviceBusyError(RuntimeError):
         self.holder = holder
 
 
+SYSTEM_LOCK_DIRS = ("/run/lock", "/var/lock", "/tmp")
+"""Machine-wide parents of the lock directory, first existing writable one wins."""
+
+LOCK_DIR_NAME = "clearance-rig"
+
+
 def default_lock_dir() -> Path:
-    """Where lock files go unless told otherwise (see the module notes)."""
+    """Where lock files go unless told otherwise: ``RIG_LOCK_DIR``, else the machine-wide
+    directory (see the module notes), the same for every user and environment."""
+    env = os.environ.get(LOCK_DIR_ENV)
+    if env:
+        return Path(env)
+    for parent in SYSTEM_LOCK_DIRS:
+        if os.path.isdir(parent) and os.access(parent, os.W_OK | os.X_OK):
+            return Path(parent) / LOCK_DIR_NAME
+    return Path("/tmp") / LOCK_DIR_NAME
+
+
+def user_lock_dir() -> Path:
+    """A per-user lock directory (for simulated devices): ``RIG_LOCK_DIR``,
+    ``$XDG_RUNTIME_DIR/clearance-rig`` or ``~/.cache/clearance-rig/locks``."""
     env = os.environ.get(LOCK_DIR_ENV)
     if env:
         return Path(env)
@@ -68,6 +98,37 @@ def default_lock_dir() -> Path:
 def _file_name(device: str) -> str:
     safe = re.sub(r"[^A-Za-z0-9._-]+", "_", device).strip("._") or "device"
     return f"{safe}.lock"
+
+
+def _make_shared_dir(path: Path) -> None:
+    """Create the lock directory; a machine-wide one world-writable with the sticky bit."""
+    if path.is_dir():
+        return
+    path.mkdir(parents=True, exist_ok=True)
+    if str(path.parent) in SYSTEM_LOCK_DIRS:
+        try:
+            os.chmod(path, 0o1777)
+        except OSError as exc:  # made by someone else in the meantime
+            logger.debug("cannot chmod %s: %s", path, exc)
+
+
+def _open_lock_file(path: Path):
+    """Open (creating if need be) a lock file, readable and writable by every user."""
+    try:
+        fd = os.open(path, os.O_RDWR)
+    except FileNotFoundError:
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            fd = os.open(path, os.O_RDWR)
+        else:
+            try:
+                os.fchmod(fd, 0o666)  # whatever the umask: other users must open it too
+            except OSError:
+                pass
+    except PermissionError:
+        fd = os.open(path, os.O_RDONLY)  # enough to lock and to read the holder
+    return os.fdopen(fd, "r+" if os.access(path, os.W_OK) else "r", encoding="utf-8")
 
 
 def _read_holder(path: Path) -> dict:
@@ -83,7 +144,7 @@ def lock_holder(device: str, lock_dir: str | os.PathLike[str] | None = None) -> 
     path = Path(lock_dir or default_lock_dir()) / _file_name(device)
     if not path.exists():
         return None
-    with open(path, "a+") as fh:
+    with _open_lock_file(path) as fh:
         try:
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -129,8 +190,8 @@ class DeviceLock:
         """Take the lock or raise :class:`DeviceBusyError` at once (never waits)."""
         if self._fh is not None:
             return self
-        self.lock_dir.mkdir(parents=True, exist_ok=True)
-        fh = open(self.path, "a+", encoding="utf-8")  # noqa: SIM115 - held until release
+        _make_shared_dir(self.lock_dir)
+        fh = _open_lock_file(self.path)
         try:
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -145,10 +206,11 @@ class DeviceLock:
             "since": time.strftime("%Y-%m-%d %H:%M:%S"),
             "device": self.device,
         }
-        fh.seek(0)
-        fh.truncate()
-        fh.write(json.dumps(holder))
-        fh.flush()
+        if fh.writable():
+            fh.seek(0)
+            fh.truncate()
+            fh.write(json.dumps(holder))
+            fh.flush()
         self._fh = fh
         logger.info("device %r locked (%s)", self.device, self.path)
         return self
@@ -159,9 +221,10 @@ class DeviceLock:
         if fh is None:
             return
         try:
-            fh.seek(0)
-            fh.truncate()
-            fh.flush()
+            if fh.writable():
+                fh.seek(0)
+                fh.truncate()
+                fh.flush()
         finally:
             fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
             fh.close()

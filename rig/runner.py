@@ -30,6 +30,7 @@ import numpy as np
 from analysis.measurement_file import (
     SteppedSineData,
     create_stepped_sine,
+    note_output_not_at_zero,
     open_for_resume,
     read_measurement,
     write_random,
@@ -37,7 +38,7 @@ from analysis.measurement_file import (
 from rig.backends import open_backend
 from rig.engine import Procedure, RunEngine, RunOutcome
 from rig.events import EventBus, RunStarted
-from rig.lock import DeviceLock
+from rig.lock import DeviceLock, user_lock_dir
 from rig.plans import Plan, RandomPlan, SteppedSinePlan, plan_from_dict
 from rig.run_random import random_procedure
 from rig.run_stepped import stepped_sine_procedure
@@ -86,7 +87,8 @@ def open_rig(
         Passed to the backend (``truth``, ``seed``, ``realtime``, ... for ``sim``); ``ni`` gets
         the setup's device unless given.
     lock_dir : path, optional
-        Directory of the device locks.
+        Directory of the device locks (default: the machine-wide one of :mod:`rig.lock` for a
+        real device, the per-user one for a simulated device).
     amplifier_port : str, optional
         Serial port of the amplifier (default the setup's; "" for none).
 
@@ -99,6 +101,8 @@ def open_rig(
         ``--backend sim``).
     """
     name = lock_name(backend, setup)
+    if lock_dir is None and backend != "ni":
+        lock_dir = user_lock_dir()  # a simulated device is one per process, not per machine
     with DeviceLock(name, lock_dir):
         options = dict(backend_options or {})
         if backend == "ni":
@@ -166,6 +170,9 @@ class RunSummary:
         Wall-clock and DAQ-clock duration of this run [s].
     fault_kind : str
     interrupted : bool
+    output_at_zero : bool
+        Whether the final ramp of the output to 0 V completed (false: the output may still be
+        driven; ``message`` names the error).
     """
 
     path: Path
@@ -183,12 +190,15 @@ class RunSummary:
     rig_time_s: float
     fault_kind: str = ""
     interrupted: bool = False
+    output_at_zero: bool = True
 
     def lines(self) -> list[str]:
         """A one-screen summary."""
         out = [f"run       {self.plan_name} ({self.kind}): {self.status}"]
         if self.message:
             out.append(f"ended     {self.message}")
+        if not self.output_at_zero:
+            out.append("OUTPUT    the ramp to 0 V failed: the output may not be at 0 V")
         out.append(f"file      {self.path}")
         if self.kind == "stepped-sine":
             out.append(
@@ -258,6 +268,7 @@ def summarize(
         rig_time_s=outcome.rig_time_s if outcome else 0.0,
         fault_kind=outcome.fault_kind if outcome else "",
         interrupted=outcome.interrupted if outcome else False,
+        output_at_zero=outcome.output_at_zero if outcome else True,
     )
 
 
@@ -476,7 +487,7 @@ class TestRun:
                 writer.finish("failed", f"{type(exc).__name__}: {exc}")
             raise
         with deferred_interrupts():
-            writer.finish(outcome.status, outcome.message)
+            writer.finish(outcome.status, outcome.message, outcome.output_at_zero)
         return outcome
 
     def _execute_random(self) -> RunOutcome:
@@ -486,4 +497,8 @@ class TestRun:
         procedure = random_procedure(self.plan)
         if self.procedure_wrapper is not None:
             procedure = self.procedure_wrapper(procedure)
-        return self.engine.run(procedure, _RandomSink(self))
+        outcome = self.engine.run(procedure, _RandomSink(self))
+        if not outcome.output_at_zero and self.path.exists():
+            with deferred_interrupts():
+                note_output_not_at_zero(self.path, outcome.message)
+        return outcome

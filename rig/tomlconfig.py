@@ -77,12 +77,13 @@ class Table:
 
     @contextmanager
     def checking(self, key: str | None = None) -> Iterator[None]:
-        """Re-raise a ``ValueError``/``TypeError`` from a constructor with this key path."""
+        """Re-raise a ``ValueError``, ``TypeError`` or ``ArithmeticError`` (an overflow from an
+        infinite or huge number) from a constructor with this key path."""
         try:
             yield
         except ConfigError:
             raise
-        except (ValueError, TypeError) as exc:
+        except (ValueError, TypeError, ArithmeticError) as exc:
             raise self.error(key, str(exc)) from exc
 
     # -- access ---------------------------------------------------------------------------------

@@ -477,13 +477,27 @@ def _discrete_terms(frame: FrameSpec) -> tuple[list, list]:
     return terms, masses
 
 
-def _warn_empty_dofs(labels: tuple[Dof, ...], const: dict, unit: dict) -> None:
-    """Log DOFs that no element, spring or mass reaches (singular M and K)."""
+def _check_empty_dofs(labels: tuple[Dof, ...], const: dict, unit: dict) -> None:
+    """Refuse DOFs that no element, spring or mass reaches (M and K singular there: the
+    eigensolver would fail with a bare LAPACK message), naming the node."""
     touched = np.zeros(len(labels), dtype=bool)
     for a in (*const.values(), *unit.values()):
         touched |= np.abs(a).sum(axis=0) > 0
+    empty: dict[str, list[str]] = {}
     for i in np.flatnonzero(~touched):
-        log.warning("DOF %s/%s has neither mass nor stiffness; support it", *labels[i])
+        node, direction = labels[i]
+        empty.setdefault(node, []).append(direction)
+    for node, dirs in empty.items():
+        unused = len(dirs) == len(DIRECTIONS)
+        raise SpecError(
+            f"nodes.{node}",
+            (
+                "no member, joint, spring or mass uses this node; connect it or remove it"
+                if unused
+                else f"DOF(s) {', '.join(f'{node}/{d}' for d in dirs)} have neither mass nor "
+                "stiffness; connect or support them"
+            ),
+        )
 
 
 def build_structure(frame: FrameSpec) -> LinearStructure:
@@ -516,7 +530,7 @@ def build_structure(frame: FrameSpec) -> LinearStructure:
     zeros = np.zeros((n, n))
     for a in (*unit.values(), zeros):
         a.setflags(write=False)
-    _warn_empty_dofs(labels, const, unit)
+    _check_empty_dofs(labels, const, unit)
     n_elements: dict[str, int] = {}
     for i, _, _ in elements:
         group = frame.members[i].group

@@ -48,7 +48,7 @@ Examples
 >>> h = data.select(level_index=0, sweep_direction=+1).frf("acc7")  # (n, H) complex
 """
 
-from .data import RandomData, RawRecord, RunData, SteppedSineData
+from .data import RandomData, RawRecord, ResumeEvent, RunData, SteppedSineData
 from .layout import OutputExistsError
 from .random_writer import write_random
 from .reader import read_measurement, read_raw
@@ -68,7 +68,12 @@ from .schema import (
     safe_std,
 )
 from .status import incomplete_note, input_notes, planned_steps, require_steps, status_text
-from .writer import SteppedSineWriter, create_stepped_sine, open_for_resume
+from .writer import (
+    SteppedSineWriter,
+    create_stepped_sine,
+    note_output_not_at_zero,
+    open_for_resume,
+)
 
 __all__ = [
     "CHANNEL_FIELDS",
@@ -88,6 +93,7 @@ __all__ = [
     "RandomData",
     "RandomFRF",
     "RawRecord",
+    "ResumeEvent",
     "RunData",
     "StepRecord",
     "SteppedSineData",
@@ -95,6 +101,7 @@ __all__ = [
     "create_stepped_sine",
     "incomplete_note",
     "input_notes",
+    "note_output_not_at_zero",
     "open_for_resume",
     "planned_steps",
     "read_measurement",

@@ -19,7 +19,30 @@ import numpy as np
 from .records import Actuator, ChannelInfo
 from .schema import step_fields
 
-__all__ = ["RandomData", "RawRecord", "RunData", "SteppedSineData"]
+__all__ = ["RandomData", "RawRecord", "ResumeEvent", "RunData", "SteppedSineData"]
+
+
+@dataclass(frozen=True)
+class ResumeEvent:
+    """One resumption of an interrupted run (an entry of the root attribute ``resumes``).
+
+    Attributes
+    ----------
+    time : str
+        When the run was resumed (ISO 8601, UTC).
+    steps_on_disk : int
+        Steps the file held then.
+    next_plan_index : int
+        The smallest plan index not on disk: the step the run resumed from.
+    previous_status, previous_message : str
+        How the interrupted run had ended (``exit_status`` and ``exit_message`` before).
+    """
+
+    time: str
+    steps_on_disk: int
+    next_plan_index: int
+    previous_status: str
+    previous_message: str
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,6 +69,12 @@ class RunData:
         Package -> version of the writing software.
     config, setup : dict
         The run configuration and the lab setup (parsed ``config_json``, ``setup_json``).
+    output_at_zero : bool or None
+        Whether the ramp of the output to 0 V at the end of the run completed (format_version
+        2); None for a version-1 file, which does not say.
+    resumes : tuple of ResumeEvent
+        Each time the run was interrupted and resumed, oldest first (empty for a run never
+        resumed, and for a version-1 file, which does not record them).
     """
 
     path: Path
@@ -59,6 +88,8 @@ class RunData:
     software: dict[str, str]
     config: dict[str, Any]
     setup: dict[str, Any]
+    output_at_zero: bool | None
+    resumes: tuple[ResumeEvent, ...]
 
     @property
     def channel_names(self) -> tuple[str, ...]:

@@ -82,6 +82,8 @@ def write_header(
     f.attrs["complete"] = np.bool_(exit_status == "success")
     f.attrs["exit_status"] = exit_status
     f.attrs["exit_message"] = ""
+    f.attrs["output_at_zero"] = np.bool_(True)
+    f.attrs["resumes"] = "[]"
     setup = f.create_group("setup")
     setup.attrs["config_json"] = config_json
     setup.attrs["setup_json"] = setup_json

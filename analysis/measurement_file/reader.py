@@ -13,13 +13,16 @@ it, what was expected and what was found. What the contract leaves open is read 
 - datasets need not be chunked or resizable; rows of ``/steps`` beyond ``n_complete`` (a step
   in progress when a run died) are ignored.
 
-Versions: format_version 1 is the first and the newest this module knows; a newer file is
-refused with a message saying so (its changes cannot be interpreted). When the format grows, the
-loader of every older version stays here, so older files keep reading.
+Versions: format_version 2 is the newest this module knows; a newer file is refused with a
+message saying so (its changes cannot be interpreted). Version 2 adds the root attributes
+``output_at_zero`` (bool) and ``resumes`` (a JSON array of resume events); a version-1 file,
+which has neither, reads with ``output_at_zero`` None and no resumes. When the format grows,
+the loader of every older version stays here, so older files keep reading.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 from datetime import UTC, datetime
 from os import PathLike
@@ -29,7 +32,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from .data import RandomData, RawRecord, SteppedSineData
+from .data import RandomData, RawRecord, ResumeEvent, SteppedSineData
 from .h5check import FileChecker, as_text, open_file
 from .records import (
     ESTIMATORS,
@@ -57,6 +60,14 @@ from .schema import (
 )
 
 __all__ = ["load_open_file", "read_measurement", "read_raw"]
+
+_RESUME_FIELDS = {
+    "time": str,
+    "steps_on_disk": int,
+    "next_plan_index": int,
+    "previous_status": str,
+    "previous_message": str,
+}
 
 log = logging.getLogger(__name__)
 
@@ -174,6 +185,10 @@ class _Checker(FileChecker):
                 f"complete {complete} with exit_status {status!r}",
                 "complete",
             )
+        output_at_zero, resumes = None, ()
+        if version >= 2:
+            output_at_zero = self.attr_bool(f, "output_at_zero")
+            resumes = self.resumes()
         setup = self.group("/setup")
         return {
             "path": self.path,
@@ -186,7 +201,38 @@ class _Checker(FileChecker):
             "software": software,
             "config": self.attr_json(setup, "config_json"),
             "setup": self.attr_json(setup, "setup_json"),
+            "output_at_zero": output_at_zero,
+            "resumes": resumes,
         }
+
+    def resumes(self) -> tuple[ResumeEvent, ...]:
+        """The root attribute ``resumes``: a JSON array of resume events."""
+        text = self.attr_text(self.f, "resumes")
+        want = (
+            "a JSON array of objects with time (str), steps_on_disk (int >= 0), next_plan_index "
+            "(int >= 0), previous_status (str), previous_message (str)"
+        )
+        try:
+            items = json.loads(text)
+        except (json.JSONDecodeError, RecursionError) as exc:
+            self.fail("/", want, f"invalid JSON ({exc})", "resumes")
+        if not isinstance(items, list):
+            self.fail("/", want, f"a JSON {type(items).__name__}", "resumes")
+        events = []
+        for i, item in enumerate(items):
+            ok = isinstance(item, dict) and set(item) >= set(_RESUME_FIELDS)
+            if ok:
+                values = {k: item[k] for k in _RESUME_FIELDS}
+                for k, kind in _RESUME_FIELDS.items():
+                    v = values[k]
+                    if kind is int:
+                        ok = ok and type(v) is int and v >= 0
+                    else:
+                        ok = ok and isinstance(v, str)
+            if not ok:
+                self.fail("/", want, f"entry {i}: {item!r:.200}", "resumes")
+            events.append(ResumeEvent(**values))
+        return tuple(events)
 
     def channels(self) -> tuple[ChannelInfo, ...]:
         loc = "/setup/channels"

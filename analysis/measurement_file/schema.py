@@ -1,4 +1,4 @@
-"""Constants, errors and array checks of the measurement-file contract (format_version 1).
+"""Constants, errors and array checks of the measurement-file contract (format_version 2).
 
 Everything the writer and the reader must agree on lives here: the names and allowed values of
 the contract (docs/measurement-file.md), the layout of the per-step datasets, and one array
@@ -44,8 +44,9 @@ __all__ = [
 FORMAT = "rig-measurement"
 """Value of the root attribute ``format``."""
 
-FORMAT_VERSION = 1
-"""The ``format_version`` this module writes (and the newest it reads)."""
+FORMAT_VERSION = 2
+"""The ``format_version`` this module writes (and the newest it reads; version 1 files are read
+too). Version 2 adds the root attributes ``output_at_zero`` and ``resumes``."""
 
 KIND_STEPPED_SINE = "stepped-sine"
 KIND_RANDOM = "random"

@@ -8,8 +8,11 @@ most the step in progress; readers ignore rows beyond ``n_complete``.
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import logging
 from collections.abc import Iterable, Mapping
+from datetime import UTC, datetime
 from os import PathLike
 from pathlib import Path
 from types import TracebackType
@@ -33,6 +36,7 @@ from .records import (
 )
 from .schema import (
     FINAL_STATUSES,
+    FORMAT_VERSION,
     KIND_STEPPED_SINE,
     FieldValueError,
     MeasurementFileError,
@@ -42,7 +46,12 @@ from .schema import (
     step_fields,
 )
 
-__all__ = ["SteppedSineWriter", "create_stepped_sine", "open_for_resume"]
+__all__ = [
+    "SteppedSineWriter",
+    "create_stepped_sine",
+    "note_output_not_at_zero",
+    "open_for_resume",
+]
 
 log = logging.getLogger(__name__)
 
@@ -163,7 +172,10 @@ def open_for_resume(path: str | PathLike[str]) -> SteppedSineWriter:
 
     The file is validated; rows beyond ``n_complete`` (a step in progress when the run died) and
     raw data of steps that did not complete are removed; ``exit_status`` goes back to
-    ``"running"``. Skip the plan steps in :attr:`SteppedSineWriter.completed_plan_indices`.
+    ``"running"``, and the resumption (time, steps on disk, the plan index resumed from, how the
+    interrupted run had ended) is appended to the root attribute ``resumes``. A version-1 file
+    becomes a version-2 file (its layout is otherwise the same). Skip the plan steps in
+    :attr:`SteppedSineWriter.completed_plan_indices`.
 
     Raises
     ------
@@ -207,6 +219,25 @@ def open_for_resume(path: str | PathLike[str]) -> SteppedSineWriter:
                 log.info("%s: removing /raw/%s of a step that did not complete", path, key)
                 del f["raw"][key]
         previous = data.exit_status
+        done = set(data.plan_index.tolist())
+        event = {
+            "time": datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z"),
+            "steps_on_disk": int(n),
+            "next_plan_index": next(i for i in range(len(done) + 1) if i not in done),
+            "previous_status": previous,
+            "previous_message": data.exit_message,
+        }
+        events = [dataclasses.asdict(e) for e in data.resumes] + [event]
+        if data.format_version < FORMAT_VERSION:
+            log.info(
+                "%s: format_version %d -> %d (the resume is recorded)",
+                path,
+                data.format_version,
+                FORMAT_VERSION,
+            )
+            f.attrs["format_version"] = np.int64(FORMAT_VERSION)
+        f.attrs["resumes"] = json.dumps(events, ensure_ascii=False)
+        f.attrs["output_at_zero"] = np.bool_(True)
         f.attrs["complete"] = np.bool_(False)
         f.attrs["exit_status"] = "running"
         f.attrs["exit_message"] = ""
@@ -216,6 +247,15 @@ def open_for_resume(path: str | PathLike[str]) -> SteppedSineWriter:
         raise
     log.info("resuming %s: %d steps done, previous exit_status %r", path, n, previous)
     return SteppedSineWriter._attach(path, f, data)
+
+
+def note_output_not_at_zero(path: str | PathLike[str], message: str) -> None:
+    """Record in a finished file (a random run's, written before the output was stopped) that
+    the ramp of the output to 0 V failed: ``output_at_zero`` false, ``exit_message`` set."""
+    with h5py.File(path, "r+") as f:
+        if f.attrs.get("format_version", 1) >= 2:
+            f.attrs["output_at_zero"] = np.bool_(False)
+        f.attrs["exit_message"] = message
 
 
 def _load_for_update(path: Path) -> SteppedSineData | RandomData:
@@ -390,15 +430,17 @@ class SteppedSineWriter:
         f.flush()
 
     # -- ending --------------------------------------------------------------------------------
-    def finish(self, status: str, message: str = "") -> None:
+    def finish(self, status: str, message: str = "", output_at_zero: bool = True) -> None:
         """End the run: set ``complete`` (true only for ``"success"``), ``exit_status``,
-        ``exit_message``; flush and close the file.
+        ``exit_message``, ``output_at_zero``; flush and close the file.
 
         Parameters
         ----------
         status : {"success", "aborted", "failed"}
         message : str
             Why the run ended (free text, may be empty).
+        output_at_zero : bool
+            Whether the ramp of the output to 0 V at the end of the run completed.
         """
         if status not in FINAL_STATUSES:
             raise ValueError(f"finish: status must be one of {FINAL_STATUSES}, got {status!r}")
@@ -413,6 +455,7 @@ class SteppedSineWriter:
             f.attrs["complete"] = np.bool_(status == "success")
             f.attrs["exit_status"] = status
             f.attrs["exit_message"] = message
+            f.attrs["output_at_zero"] = np.bool_(output_at_zero)
             f.flush()
         finally:
             f.close()

@@ -414,7 +414,11 @@ def _delete(name: str) -> Callable[[h5py.File], None]:
 
 _BAD_STEPPED = {
     "format string": (_set_attr("/", "format", "other-format"), "/", "format"),
-    "newer version": (_set_attr("/", "format_version", np.int64(2)), "/", "format_version"),
+    "newer version": (
+        _set_attr("/", "format_version", np.int64(FORMAT_VERSION + 1)),
+        "/",
+        "format_version",
+    ),
     "version zero": (_set_attr("/", "format_version", np.int64(0)), "/", "format_version"),
     "unknown kind": (_set_attr("/", "kind", "sweep"), "/", "kind"),
     "complete without success": (_set_attr("/", "exit_status", "failed"), "/", "complete"),
@@ -480,8 +484,8 @@ def test_invalid_stepped_sine_file_is_reported_with_its_place(tmp_path: Path, ca
 def test_newer_version_message_says_what_is_unsupported(tmp_path: Path) -> None:
     path = ms.write_sample_stepped_sine(tmp_path / "run.h5")
     with h5py.File(path, "r+") as f:
-        f.attrs["format_version"] = np.int64(3)
-    with pytest.raises(MeasurementFileError, match=r"format_version at most 1.*found 3: .*newer"):
+        f.attrs["format_version"] = np.int64(FORMAT_VERSION + 1)
+    with pytest.raises(MeasurementFileError, match=rf"format_version at most {FORMAT_VERSION}.*found {FORMAT_VERSION + 1}: .*newer"):
         read_measurement(path)
 
 

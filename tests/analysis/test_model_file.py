@@ -13,6 +13,7 @@ from analysis.model import (
     ModelFileError,
     NonlinearSpec,
     Parameter,
+    ParameterBoundsWarning,
     load_model,
 )
 
@@ -362,3 +363,79 @@ def test_with_and_without_nonlinear(test_kind):
     damped = model.with_damping(DampingSpec(0.03, {1: 0.1}))
     assert damped.damping.zeta(3) == [0.1, 0.03, 0.03]
     assert damped.assemble() is model.assemble()  # same structure and values: shared cache
+
+
+# -- the whole file is checked when it is loaded -----------------------------------------------
+CONTACT = """
+[parameters.k_c]
+value = 4.5e5
+lower = 1e4
+upper = 1e7
+[[nonlinear]]
+name = "stop"
+kind = "hertz_contact"
+at = { point = 1 }
+params = { k_c = "k_c", gap = 6e-4, v = 0.0 }
+"""
+
+LOAD_ERRORS = {
+    "NaN coordinate": (SIMPLE.replace("tip = [1.0, 0.0]", "tip = [nan, 0.0]"), "nodes.tip[0]"),
+    "infinite coordinate": (SIMPLE.replace("mid = [0.5, 0.0]", "mid = [0.5, inf]"), "nodes.mid[1]"),
+    "node no element uses": (
+        SIMPLE.replace("tip = [1.0, 0.0]", "tip = [1.0, 0.0]\nlost = [3.0, 1.0]"),
+        "nodes.lost: no member, joint, spring or mass uses this node",
+    ),
+    "unknown element kind": (
+        SIMPLE + CONTACT.replace("hertz_contact", "herz_contact"),
+        "nonlinear[0].kind: unknown element kind 'herz_contact'",
+    ),
+    "unknown element parameter": (
+        SIMPLE + CONTACT.replace("v = 0.0", "v = 0.0, damping = 3.0"),
+        "nonlinear[0].params.damping: element 'hertz_contact': unknown parameter(s) ['damping']",
+    ),
+    "negative k_c": (
+        SIMPLE + CONTACT.replace("value = 4.5e5\nlower = 1e4", "value = -4.5e5\nlower = -1e7"),
+        "nonlinear[0].params.k_c: element 'hertz_contact': parameter 'k_c' must be > 0",
+    ),
+    "negative literal gap": (
+        SIMPLE + CONTACT.replace("gap = 6e-4", "gap = -6e-4"),
+        "nonlinear[0].params.gap: element 'hertz_contact': parameter 'gap' must be >= 0",
+    ),
+    "NaN literal element parameter": (
+        SIMPLE + CONTACT.replace("gap = 6e-4", "gap = nan"),
+        "nonlinear[0].params.gap: expected a finite number",
+    ),
+    "unicode digit point": (
+        SIMPLE.replace("[points.1]", '[points."²"]'),
+        "points.²: point numbers",
+    ),
+}
+
+
+@pytest.mark.parametrize(("text", "expected"), LOAD_ERRORS.values(), ids=LOAD_ERRORS.keys())
+def test_load_refuses_a_bad_model_with_file_and_key_path(tmp_path, text, expected):
+    message = error_text(tmp_path, text)
+    assert expected in message
+    assert "LAPACK" not in message
+
+
+def test_negative_k_c_names_the_model_parameter(tmp_path):
+    text = SIMPLE + CONTACT.replace("value = 4.5e5\nlower = 1e4", "value = -4.5e5\nlower = -1e7")
+    assert "parameters.k_c.value = -450000.0" in error_text(tmp_path, text)
+
+
+def test_a_value_outside_its_bounds_is_a_warning_naming_it(tmp_path):
+    path = tmp_path / "m.toml"
+    path.write_text(SIMPLE + CONTACT.replace("value = 4.5e5", "value = 2e7\nnominal = 4.5e5"))
+    with pytest.warns(ParameterBoundsWarning) as record:
+        model = load_model(path)
+    assert model.values()["k_c"] == 2e7
+    (w,) = record
+    text = str(w.message)
+    assert str(path) in text and "parameters.k_c.value" in text
+    assert "20000000.0" in text and "[10000.0, 10000000.0]" in text
+
+
+def test_values_within_bounds_load_without_a_warning(recwarn):
+    load_model()
+    assert not [w for w in recwarn if issubclass(w.category, ParameterBoundsWarning)]

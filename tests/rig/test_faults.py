@@ -7,13 +7,14 @@ import numpy as np
 import pytest
 
 from analysis.measurement_file import read_measurement
+from rig.backends.protocol import BackendError
 from rig.commands import WriteStep
 from rig.control.force_controller import ControlSettings
 from rig.events import FaultRaised, RunWarning, StepFinished
 from rig.plans import ControlPolicy, Limits, ResponseLimit
 from rig.runner import TestRun, open_rig
 from sim_backend.amplifier import AmplifierModel
-from sim_backend.daq import FaultSwitches
+from sim_backend.daq import FaultSwitches, SimulatedDaq
 from sim_backend.serial_amplifier import SimulatedAmplifierPort
 from tests.rig.rig_helpers import (
     assert_ramped_to_zero,
@@ -288,3 +289,48 @@ def test_pause_on_a_recoverable_fault_then_resume(tmp_path, pause):
     daq.close()
     assert [f.kind for f in faults] == ["sensor"] and faults[0].paused
     assert summary.status == "success" and summary.n_done == PLAN.n_steps
+
+
+class _StopFails(SimulatedDaq):
+    """The simulated rig whose output stage does not answer the stop request."""
+
+    def stop(self) -> None:
+        if self._state == "running":
+            raise BackendError("the output task did not stop (device not responding)")
+        super().stop()
+
+
+def _stop_fails_daq(setup):
+    return _StopFails("reference", sensor_masses_kg=setup.sensor_masses_kg(), seed=7)
+
+
+@pytest.mark.parametrize("abort_after", [None, 1])
+def test_a_failed_ramp_to_zero_is_said_never_claimed(tmp_path, abort_after):
+    setup = setup_at()
+    daq = _stop_fails_daq(setup)
+    subscribers = []
+    if abort_after:
+        subscribers = [
+            _after_step(1, lambda: run_holder[0].engine.abort("stopped by the operator"))
+        ]
+    run_holder = []
+    try:
+        run = TestRun(daq, PLAN, setup, tmp_path / "s.h5")
+        run_holder.append(run)
+        for s in subscribers:
+            run.engine.bus.subscribe(s)
+        summary = run.execute()
+    finally:
+        daq._state = "closed"  # the stand-in cannot be stopped
+    data = read_measurement(tmp_path / "s.h5")
+    for text in (data.exit_message, summary.message):
+        assert "Output ramped to 0 V" not in text
+        assert "Ramping the output to 0 V FAILED" in text
+        assert "did not stop (device not responding)" in text
+        assert "may not be at 0 V" in text
+    assert not summary.output_at_zero and data.output_at_zero is False
+    assert any("may not be at 0 V" in line for line in summary.lines())
+    if abort_after:
+        assert summary.status == "aborted" and "stopped by the operator" in data.exit_message
+    else:
+        assert summary.status == "success"

@@ -2,13 +2,16 @@
 
 import os
 import signal
+import stat
 import subprocess
 import sys
 import textwrap
+import uuid
+from pathlib import Path
 
 import pytest
 
-from rig.lock import DeviceBusyError, DeviceLock, default_lock_dir, lock_holder
+from rig.lock import SYSTEM_LOCK_DIRS, DeviceBusyError, DeviceLock, default_lock_dir, lock_holder
 from rig.runner import open_rig
 from tests.rig.rig_helpers import setup_at
 
@@ -68,3 +71,76 @@ def test_lock_directory_from_the_environment(tmp_path, monkeypatch):
         assert lock.path.parent == tmp_path / "locks" and "/" not in lock.path.name
     monkeypatch.delenv("RIG_LOCK_DIR")
     assert "clearance-rig" in str(default_lock_dir())
+
+
+def _env_of_another_user(tmp_path, who):
+    """An environment as another user's would be: own HOME, XDG dirs and TMPDIR, no
+    RIG_LOCK_DIR."""
+    home = tmp_path / who
+    (home / "run").mkdir(parents=True)
+    env = {k: v for k, v in os.environ.items() if k != "RIG_LOCK_DIR"}
+    env.update(
+        HOME=str(home),
+        XDG_RUNTIME_DIR=str(home / "run"),
+        XDG_CACHE_HOME=str(home / "cache"),
+        TMPDIR=str(home),
+        USER=who,
+    )
+    return env
+
+
+def test_two_users_see_each_others_lock_of_a_real_device(tmp_path):
+    device = f"cDAQ-test-{uuid.uuid4().hex[:8]}"
+    holder_code = textwrap.dedent(
+        f"""
+        import time
+        from rig.lock import DeviceLock
+        lock = DeviceLock({device!r}).acquire()
+        print(lock.path, flush=True)
+        time.sleep(60)
+        """
+    )
+    taker_code = textwrap.dedent(
+        f"""
+        from rig.lock import DeviceBusyError, DeviceLock
+        try:
+            DeviceLock({device!r}).acquire()
+        except DeviceBusyError as exc:
+            print("busy:", exc)
+        else:
+            print("taken")
+        """
+    )
+    first = subprocess.Popen(
+        [sys.executable, "-c", holder_code],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=_env_of_another_user(tmp_path, "alice"),
+    )
+    path = None
+    try:
+        path = Path(first.stdout.readline().strip())
+        assert str(tmp_path) not in str(path)  # not under anyone's home
+        second = subprocess.run(
+            [sys.executable, "-c", taker_code],
+            capture_output=True,
+            text=True,
+            env=_env_of_another_user(tmp_path, "bob"),
+            timeout=60,
+        )
+        assert second.stdout.startswith("busy:"), second.stdout + second.stderr
+        assert f"process {first.pid}" in second.stdout
+        assert stat.S_IMODE(path.parent.stat().st_mode) == 0o1777  # world-writable, sticky
+        assert stat.S_IMODE(path.stat().st_mode) == 0o666
+    finally:
+        first.send_signal(signal.SIGKILL)
+        first.wait(10)
+        if path is not None and path.name.startswith("cDAQ-test-"):
+            path.unlink(missing_ok=True)
+
+
+def test_the_lock_dir_option_still_overrides(tmp_path, monkeypatch):
+    monkeypatch.delenv("RIG_LOCK_DIR", raising=False)
+    assert default_lock_dir().parent in {Path(p) for p in SYSTEM_LOCK_DIRS}
+    with DeviceLock("cDAQ1", tmp_path / "mine") as lock:
+        assert lock.path.parent == tmp_path / "mine"

@@ -199,3 +199,53 @@ def test_the_library_keeps_its_own_wording_and_the_cli_rephrases_each_kind(tmp_p
     for text in ("pass overwrite to replace it", "use --overwrite to replace it"):
         msg = file_exists_message(FileExistsError(f"{out}: file exists ({text})"))
         assert msg == f"{out}: file exists (pass --overwrite to replace it)"
+
+
+def test_a_simulated_fault_switched_on_from_the_command_line(files, tmp_path):
+    out = tmp_path / "fault.h5"
+    r = _rig(
+        "run", files / "steps.toml", "--setup", files / "setup.toml", "--out", out,
+        "--backend", "sim", "--lock-dir", files, "--json", "--fault", "acc7:disconnect@step3",
+    )  # fmt: skip
+    assert r.returncode != 0
+    summary = json.loads(r.stdout.strip().splitlines()[-1])
+    assert summary["status"] == "aborted" and summary["n_done"] == 2, summary
+    data = read_measurement(out)
+    assert "'acc7'" in data.exit_message and data.n_steps == 2
+    assert data.config["run"]["argv"][-2:] == ["--fault", "acc7:disconnect@step3"]
+
+
+@pytest.mark.parametrize(
+    ("spec", "expected"),
+    [
+        ("acc7:disconect@step3", "unknown fault 'disconect'"),
+        ("acc7:disconnect@3", "the step is written @stepN"),
+        ("acc7:disconnect@step0", "steps are counted from 1"),
+        ("disconnect", "'disconnect' needs a channel"),
+        ("acc7:clip", "clip needs a level"),
+        ("acc7:clip=-2", "must be a number > 0"),
+        ("acc7:clip=lots", "the level 'lots' is not a number"),
+        ("acc99:disconnect", "no channel 'acc99' in the setup"),
+        ("acc7:read-timeout", "concerns the whole rig"),
+    ],
+)
+def test_a_bad_fault_is_refused_with_the_syntax(files, tmp_path, spec, expected):
+    r = _rig(
+        "run", files / "steps.toml", "--setup", files / "setup.toml", "--out",
+        tmp_path / "x.h5", "--backend", "sim", "--lock-dir", files, "--fault", spec,
+    )  # fmt: skip
+    assert r.returncode == 2, r.stderr
+    assert expected in r.stderr and f"--fault {spec!r}" in r.stderr
+    assert "Traceback" not in r.stderr
+    if "setup" not in expected:
+        assert "[CHANNEL:]KIND[=LEVEL][@stepN]" in r.stderr
+    assert not (tmp_path / "x.h5").exists()
+
+
+def test_fault_specs_parse():
+    from rig.faults import SimFault, parse_sim_fault
+
+    assert parse_sim_fault("acc7:disconnect@step3") == SimFault("disconnect", "acc7", None, 3)
+    assert parse_sim_fault("acc7:clip=12") == SimFault("clip", "acc7", 12.0, 1)
+    assert parse_sim_fault("read-timeout@step2") == SimFault("read-timeout", "", None, 2)
+    assert parse_sim_fault("amplifier-overload").kind == "amplifier-overload"
