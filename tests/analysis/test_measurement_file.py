@@ -485,7 +485,10 @@ def test_newer_version_message_says_what_is_unsupported(tmp_path: Path) -> None:
     path = ms.write_sample_stepped_sine(tmp_path / "run.h5")
     with h5py.File(path, "r+") as f:
         f.attrs["format_version"] = np.int64(FORMAT_VERSION + 1)
-    with pytest.raises(MeasurementFileError, match=rf"format_version at most {FORMAT_VERSION}.*found {FORMAT_VERSION + 1}: .*newer"):
+    with pytest.raises(
+        MeasurementFileError,
+        match=rf"format_version at most {FORMAT_VERSION}.*found {FORMAT_VERSION + 1}: .*newer",
+    ):
         read_measurement(path)
 
 
