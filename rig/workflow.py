@@ -182,10 +182,11 @@ def _nonlinear_stages(out, stepped_run, lin, planning, run, starts, reference, t
         "validation": val,
         "verdict": verdict(cal, val),
         "comparison": _reference_table(out, reference),
+        "reference_damping": _reference_damping(reference),
         "stages": log,
     }
     (out / "workflow.json").write_text(json.dumps(summary, indent=1, default=str))
-    md = _summary_markdown(summary, title, reference)
+    md = _summary_markdown(summary, title, reference, out)
     (out / "summary.md").write_text(md)
     if not quiet:
         print(md)
@@ -244,7 +245,18 @@ def _fmt(x, digits: int = 4) -> str:
     return "" if x is None else f"{x:.{digits}g}"
 
 
-def _summary_markdown(s: dict, title: str, reference: str | Path | None) -> str:
+def _reference_damping(reference: str | Path | None) -> dict:
+    from analysis.report.calibration_report import load_reference
+
+    if reference is None or not Path(reference).exists():
+        return {}
+    return load_reference(reference)["modal_damping"]
+
+
+def _summary_markdown(s: dict, title: str, reference: str | Path | None, out: Path) -> str:
+    def rel(text: str) -> str:  # paths as seen from the summary's folder
+        return str(text).replace(f"{Path(out).resolve()}/", "").replace(f"{out}/", "")
+
     v = s["verdict"]
     lines = [f"# The paper's workflow on {title}", "", "## Verdict", ""]
     if v["misfit"]:
@@ -258,9 +270,10 @@ def _summary_markdown(s: dict, title: str, reference: str | Path | None) -> str:
     else:
         cal, val = s["calibration"], s["validation"]
         lines.append(
-            f"The model fits its data within {v['adequate_rms']:g} x the noise (calibration "
-            f"{cal['chi2_per_dof'] ** 0.5:.3g}, validation at {val['level_n']:g} N "
-            f"{val['chi2_per_dof'] ** 0.5:.3g}, no cross-validation fold misfits): the "
+            f"The model fits its data within {v['adequate_rms']:g} x the noise (RMS residual over "
+            f"the noise: calibration {cal['chi2_per_dof'] ** 0.5:.3g}, validation at "
+            f"{val['level_n']:g} N {val['chi2_per_dof'] ** 0.5:.3g}; no cross-validation fold "
+            "misfits): the "
             "stated intervals carry the noise, the misfit and the uncertainty of the values "
             "the calibration holds (linear parameters, modal damping)."
         )
@@ -306,7 +319,7 @@ def _summary_markdown(s: dict, title: str, reference: str | Path | None) -> str:
     if ref_cols:
         inside = [r["inside_95"] for r in comp.values() if r.get("inside_95") is not None]
         lines += ["", f"{sum(inside)} of {len(inside)} truth values lie inside their stated 95 % "
-                  f"interval ({reference}: the simulated rig's truth, never read by the "
+                  f"interval ({rel(reference)}: the simulated rig's truth, never read by the "
                   "calibration)."]  # fmt: skip
     top = s["planning"].get("top", [])
     lines += [
@@ -329,8 +342,22 @@ def _summary_markdown(s: dict, title: str, reference: str | Path | None) -> str:
     cal = s["calibration"]
     lines += ["", "## Nonlinear calibration (Table 5)", ""]
     lines += table("nonlinear", cal["parameters"], cal["std"], {}, PAPER_TABLE5)
+    refined = cal.get("held_refined") or {}
+    if refined:
+        truth = {k: row.get("reference") for k, row in comp.items()}
+        truth |= {f"zeta_{k}": v for k, v in (s.get("reference_damping") or {}).items()}
+        lines += ["", "Refined jointly with the values it holds (the linear test's posterior as "
+                  "the prior; the calibrated model file carries these):", "",
+                  "| value | linear test | after the stepped sine | 1 sigma |"
+                  + (" truth |" if ref_cols else ""),
+                  "|---|---|---|---|" + ("---|" if ref_cols else "")]  # fmt: skip
+        for k, r in refined.items():
+            row = f"| {k} | {_fmt(r.get('start'))} | {_fmt(r['value'])} | {_fmt(r['std'], 3)} |"
+            if ref_cols:
+                row += f" {_fmt(truth.get(k))} |"
+            lines.append(row)
     noise = ", ".join(f"{k} {_fmt(x, 3)}" for k, x in cal.get("std_noise", {}).items())
-    held_from = cal.get("held") or "nowhere (held as exact)"
+    held_from = rel(cal.get("held") or "nowhere (held as exact)")
     lines += ["", f"chi2/dof {cal['chi2_per_dof']:.3f}; the held values' uncertainty from "
               f"{held_from}; noise-only 1 sigma: {noise}"]  # fmt: skip
     cv = s.get("crossval") or {}

@@ -13,6 +13,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from analysis.calibration.crossval import cross_validate
 from analysis.calibration.nonlinear import (
     CalibrationSettings,
@@ -106,6 +108,17 @@ def _held(args, model, data: SteppedSineData) -> HeldParameters | None:
     return held_from_priors(model)
 
 
+def _held_refined(res) -> dict:
+    """The held values as the joint refinement left them: name -> value, 1 sigma, the value
+    it started from (the linear calibration's) ({} without a joint refinement)."""
+    if not res.held_posterior or res.joint_names is None:
+        return {}
+    sd = np.sqrt(np.diag(res.cov_joint))
+    index = {n: i for i, n in enumerate(res.joint_names)}
+    return {n: {"value": v, "std": float(sd[index[n]]), "start": res.held.values.get(n)}
+            for n, v in res.held_posterior.items()}  # fmt: skip
+
+
 def _write_crossval(cv, out: Path) -> Path:
     from analysis.report import plot_crossval
 
@@ -192,6 +205,7 @@ def cmd_calibrate(args) -> dict:
         "chi2_per_dof": res.chi2_per_dof,
         "misfit": res.misfit,
         "held": None if held is None else held.source,
+        "held_refined": _held_refined(res),
         "lm_iterations": res.lm.nit,
         "timings": res.timings,
         "total_s": time.perf_counter() - t0,
