@@ -33,21 +33,10 @@ from analysis.logs import add_debug_option, configure_logging, note_inputs, summ
 from analysis.mhb.continuation import ContinuationSettings, continue_branch
 from analysis.mhb.sweep import solve_steps
 from analysis.model import load_model
+from analysis.paper import PAPER_CALIBRATED, paper_frequencies_hz
 from analysis.system import build_linear, build_problem
 
 log = logging.getLogger("analysis")
-
-#: The published calibrated model of the reference paper (Tables 2 and 5).
-PAPER_CALIBRATED = {
-    "E_frame": 205e9, "E_corner": 128e9, "E_beam": 201e9, "rho_corner": 5175.0,
-    "k_mount": 57989.0, "k_c": 4.51e5, "gap": 0.61e-3, "v_c": 25.21,
-}  # fmt: skip
-
-
-def paper_frequencies_hz() -> np.ndarray:
-    """21-40 Hz in 1 Hz plus 24-28 Hz in 0.1 Hz, overlaps removed, ascending."""
-    f = np.concatenate([np.arange(21, 41, 1.0), np.arange(240, 281) / 10.0])
-    return np.unique(np.round(f, 6))
 
 
 def _model(args):

@@ -26,18 +26,9 @@ import sys
 import time
 from pathlib import Path
 
+from analysis.paper import PAPER_LINEAR, PAPER_NONLINEAR, TABLE4_BEST
+
 __all__ = ["analyse_runs", "run_workflow", "verdict"]
-
-PAPER_TABLE2 = {
-    "E_frame": 205e9,
-    "E_corner": 128e9,
-    "E_beam": 201e9,
-    "rho_corner": 5175.0,
-    "k_mount": 57989.0,
-}
-PAPER_TABLE5 = {"k_c": 4.51e5, "gap": 0.61e-3, "v_c": 25.21}
-PAPER_TABLE4_TOP = "actuator 3, levels [2, 4, 6] N, range [21-40] Hz, sensors [4, 6, 7]"
-
 
 #: The simulated rig's truth, beside the results (never in a measurement file).
 TRUTH_FILE = "truth.json"
@@ -307,7 +298,7 @@ def _summary_markdown(s: dict, title: str, reference: str | Path | None, out: Pa
     lin = s["linear"]
     lines += ["", "## Linear calibration (Table 2)", ""]
     lines += table("linear", lin.get("parameters", {}), lin.get("std", {}),
-                   lin.get("status", {}), PAPER_TABLE2)  # fmt: skip
+                   lin.get("status", {}), PAPER_LINEAR)  # fmt: skip
     held = lin.get("held", {})
     if held:
         lines += ["", "Not determined by the random test, held at the prior:", ""]
@@ -326,7 +317,7 @@ def _summary_markdown(s: dict, title: str, reference: str | Path | None, out: Pa
         "",
         "## Pretest planning (Table 4)",
         "",
-        f"paper's best: {PAPER_TABLE4_TOP}",
+        f"paper's best: {TABLE4_BEST}",
         "",
         "| rank | actuator | levels [N] | range [Hz] | sensors | det(FIM) |",
         "|---|---|---|---|---|---|",
@@ -341,7 +332,7 @@ def _summary_markdown(s: dict, title: str, reference: str | Path | None, out: Pa
                   "```"]  # fmt: skip
     cal = s["calibration"]
     lines += ["", "## Nonlinear calibration (Table 5)", ""]
-    lines += table("nonlinear", cal["parameters"], cal["std"], {}, PAPER_TABLE5)
+    lines += table("nonlinear", cal["parameters"], cal["std"], {}, PAPER_NONLINEAR)
     refined = cal.get("held_refined") or {}
     if refined:
         truth = {k: row.get("reference") for k, row in comp.items()}

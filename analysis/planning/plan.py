@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from analysis.model import Model
+from analysis.paper import PAPER_LINEAR
 from analysis.planning.candidates import Candidates, Configuration, NoiseModel, paper_candidates
 from analysis.planning.executors import open_executor, run_jobs
 from analysis.planning.information import (
@@ -50,12 +51,6 @@ from analysis.system import DEFAULT_HARMONICS, DEFAULT_TIME_SAMPLES
 __all__ = ["PAPER_LINEAR", "PlanSettings", "configuration_study", "parameter_scales", "plan_tests"]
 
 log = logging.getLogger(__name__)
-
-#: The paper's calibrated linear values (Table 2), with which it planned the nonlinear test.
-PAPER_LINEAR = {
-    "E_frame": 205e9, "E_corner": 128e9, "E_beam": 201e9, "rho_corner": 5175.0,
-    "k_mount": 57989.0,
-}  # fmt: skip
 
 
 @dataclass(frozen=True)
