@@ -1,50 +1,98 @@
-"""Executors for independent work (Latin hypercube candidates, folds, planning sweeps).
+"""Where independent jobs run (Latin hypercube starts, cross-validation folds, planning sweeps,
+diagnosis fits): in-process, a local process pool, or Dask.
 
-A local process pool by default; a Dask ``distributed`` cluster when a scheduler address is
-given. Dask moves pickled Python objects between machines: use it only on a lab's own trusted
-cluster, never with a scheduler reachable from outside.
+Any ``concurrent.futures.Executor`` will do (jobs are picklable specs and the work function is
+a top-level function). :func:`open_executor` makes the usual ones:
+
+- ``workers=1``: none (serial, in this process);
+- otherwise a local ``ProcessPoolExecutor`` (BLAS limited to one thread per worker);
+- with a scheduler address, the executor of a Dask ``distributed.Client``. Dask moves pickles
+  between machines and unpickling runs code: connect only to a lab's own, trusted cluster.
 """
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import contextlib
+import logging
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor
+from typing import TypeVar
 
-__all__ = ["make_executor"]
+__all__ = ["open_executor", "run_jobs"]
+
+log = logging.getLogger(__name__)
+
+J = TypeVar("J")
+R = TypeVar("R")
+
+
+def _one_blas_thread() -> None:
+    """Worker initialiser: small dense solves are slowed badly by BLAS threads."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - threadpoolctl is a dependency
+        return
+    threadpool_limits(limits=1)
 
 
 @contextlib.contextmanager
-def make_executor(
+def open_executor(
     workers: int | None = None, scheduler: str | None = None
-) -> Iterator[cf.Executor | None]:
-    """Yield an executor: ``None`` (serial) for ``workers <= 1``, a process pool, or Dask.
+) -> Iterator[Executor | None]:
+    """An executor for independent jobs, shut down on exit.
 
     Parameters
     ----------
     workers : int, optional
-        Local worker processes (default: the number of CPUs).
+        Local worker processes (default: the CPU count); 1 gives ``None`` (serial).
     scheduler : str, optional
-        Address of a Dask scheduler (``tcp://host:8786``); needs the ``dask`` extra.
+        Address of a Dask scheduler (``"tcp://host:8786"``); ``distributed`` is imported only
+        then. Only for a trusted cluster: Dask sends pickled jobs and results.
+
+    Yields
+    ------
+    Executor or None
     """
     if scheduler:
         try:
-            from distributed import Client
+            import distributed
         except ImportError:
-            raise RuntimeError(
-                "a Dask scheduler was given but 'distributed' is not installed: "
-                "pip install 'clearance-rig[dask]'"
+            raise ValueError(
+                "a scheduler address needs the 'distributed' package "
+                "(pip install 'clearance-rig[dask]')"
             ) from None
-        client = Client(scheduler)
+        client = distributed.Client(scheduler)
+        log.info("running jobs on the Dask scheduler at %s", scheduler)
         try:
             yield client.get_executor()
         finally:
             client.close()
         return
-    n = (os.cpu_count() or 1) if workers is None else workers
-    if n <= 1:
+    n = (os.cpu_count() or 1) if workers is None else int(workers)
+    if n < 1:
+        raise ValueError(f"workers: must be >= 1, got {workers}")
+    if n == 1:
         yield None
         return
-    with cf.ProcessPoolExecutor(max_workers=n) as ex:
-        yield ex
+    with ProcessPoolExecutor(max_workers=n, initializer=_one_blas_thread) as pool:
+        log.info("running jobs on %d local worker processes", n)
+        yield pool
+
+
+def run_jobs(fn: Callable[[J], R], jobs: Sequence[J], executor: Executor | None) -> list[R]:
+    """``[fn(job) for job in jobs]``, on ``executor`` if given; results in job order.
+
+    Parameters
+    ----------
+    fn : callable
+        A picklable (top-level) function.
+    jobs : sequence
+        Picklable job specs.
+    executor : Executor or None
+        ``None`` runs serially in this process.
+    """
+    if executor is None:
+        return [fn(job) for job in jobs]
+    futures = [executor.submit(fn, job) for job in jobs]
+    return [f.result() for f in futures]

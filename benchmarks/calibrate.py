@@ -26,7 +26,7 @@ from analysis.calibration.linear import calibrate_linear
 from analysis.calibration.nonlinear import CalibrationSettings, calibrate_nonlinear
 from analysis.calibration.uncertainty import damping_modes_in_band, held_from_linear_result
 from analysis.calibration.validation import validate
-from analysis.executors import make_executor
+from analysis.executors import open_executor
 from analysis.measurement_file import read_measurement
 from analysis.model import load_model
 from analysis.planning import plan_tests
@@ -81,7 +81,7 @@ def run(quick: bool = False) -> dict:
         band = (float(data.frequency_hz.min()), float(data.frequency_hz.max()))
         modes = damping_modes_in_band(model, band, max(float(o) for o in data.orders))
         held = held_from_linear_result(lin.to_json(), model, modes, source="the linear result")
-        with make_executor(None) as ex:
+        with open_executor(None) as ex:
             cal = calibrate_nonlinear(model, data, st, executor=ex, held=held)
             t0 = time.perf_counter()
             cv = cross_validate(model, data, cal, executor=ex)

@@ -32,7 +32,7 @@ from analysis.calibration.uncertainty import (
     load_linear_result,
 )
 from analysis.calibration.validation import validate
-from analysis.executors import make_executor
+from analysis.executors import open_executor
 from analysis.measurement_file import SteppedSineData, read_measurement
 from analysis.measurement_file.status import require_steps
 from analysis.model import load_model
@@ -175,7 +175,7 @@ def cmd_calibrate(args) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     cv = None
-    with make_executor(args.workers, args.scheduler) as ex:
+    with open_executor(args.workers, args.scheduler) as ex:
         res = calibrate_nonlinear(
             model, data, st, executor=ex, progress=_progress(args.json), held=held
         )
@@ -243,7 +243,7 @@ def cmd_crossval(args) -> dict:
     res, model, data_path = load_calibration(args.result)
     data = _stepped(args.run or data_path)
     out = Path(args.result).parent
-    with make_executor(args.workers, args.scheduler) as ex:
+    with open_executor(args.workers, args.scheduler) as ex:
         cv, fig = _crossval_into(res, model, data, ex, out)
     if not args.run:  # the calibration's own data: its stated intervals take the evidence
         save_calibration(res, model, out, data_path)

@@ -68,9 +68,9 @@ from analysis.diagnosis.screen import (
 )
 from analysis.diagnosis.signatures import FAMILIES, Evidence, find_signatures
 from analysis.diagnosis.verify import Verified, VerifyJob, run_verify
+from analysis.executors import open_executor
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
-from analysis.planning.executors import open_executor
 from analysis.predict_branches import BranchMatchedPredictor
 
 __all__ = ["Diagnosis", "DiagnosisSettings", "RankedCandidate", "diagnose"]

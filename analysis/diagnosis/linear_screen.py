@@ -156,7 +156,7 @@ def linear_screen(
     fits : list of LinearFit
         Every candidate, best (lowest BIC) first, ``delta_bic`` against ``base``.
     """
-    from analysis.planning.executors import run_jobs
+    from analysis.executors import run_jobs
 
     cands = [c for c in candidates if c.law.kind in LINEAR_SCREEN_KINDS]
     text, source = model.to_toml(), str(model.source)

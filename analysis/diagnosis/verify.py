@@ -11,7 +11,7 @@ per-step chi-square of the recalibrated model against the whole file, so candida
 compared on the same steps.
 
 Jobs are self-contained and picklable (:class:`VerifyJob`), so they run on any executor
-(:func:`analysis.planning.executors.open_executor`).
+(:func:`analysis.executors.open_executor`).
 """
 
 from __future__ import annotations

@@ -9,12 +9,13 @@ parameters are hard to tell apart.
 
 Modules, in the order data flows: :mod:`~analysis.planning.candidates` (settings),
 :mod:`~analysis.planning.sweeps` (one stepped MHB sweep with sensitivities per job),
-:mod:`~analysis.planning.executors` (where jobs run), :mod:`~analysis.planning.information`
+:mod:`~analysis.executors` (where jobs run), :mod:`~analysis.planning.information`
 (noise, blocks, Jacobians, MAC), :mod:`~analysis.planning.ranking` (all configurations at
 once), :mod:`~analysis.planning.plan` (the entry point), :mod:`~analysis.planning.result`,
 :mod:`~analysis.planning.cli` (``python -m analysis plan``).
 """
 
+from analysis.executors import open_executor
 from analysis.planning.candidates import (
     Candidates,
     Configuration,
@@ -23,7 +24,6 @@ from analysis.planning.candidates import (
     paper_candidates,
     quick_candidates,
 )
-from analysis.planning.executors import open_executor
 from analysis.planning.information import correlation_indices, jacobian_mac
 from analysis.planning.plan import PAPER_LINEAR, PlanSettings, plan_tests
 from analysis.planning.result import Correlations, PlanResult, RankedConfiguration

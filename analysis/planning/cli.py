@@ -12,6 +12,7 @@ import json
 import logging
 import sys
 
+from analysis.executors import open_executor
 from analysis.logs import add_debug_option, configure_logging, summarise_repeats
 from analysis.model import load_model
 from analysis.planning.candidates import (
@@ -21,7 +22,6 @@ from analysis.planning.candidates import (
     paper_candidates,
     quick_candidates,
 )
-from analysis.planning.executors import open_executor
 from analysis.planning.plan import PAPER_LINEAR, PlanSettings, plan_tests
 
 __all__ = ["add_parser", "cmd_plan", "main"]

@@ -28,10 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis.executors import open_executor, run_jobs
 from analysis.model import Model
 from analysis.paper import PAPER_LINEAR
 from analysis.planning.candidates import Candidates, Configuration, NoiseModel, paper_candidates
-from analysis.planning.executors import open_executor, run_jobs
 from analysis.planning.information import (
     correlation_indices,
     information_blocks,
