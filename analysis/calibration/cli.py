@@ -9,6 +9,7 @@ uncertainty); ``crossval --result R/calibration.json`` (again, e.g. on another f
 from __future__ import annotations
 
 import json
+import logging
 import sys
 import time
 from pathlib import Path
@@ -38,6 +39,8 @@ from analysis.measurement_file.status import require_steps
 from analysis.model import load_model
 
 __all__ = ["add_parsers"]
+
+log = logging.getLogger(__name__)
 
 
 def _progress(quiet: bool):
@@ -96,15 +99,20 @@ LINEAR_RESULT = "linear_calibration.json"
 def _held(args, model, data: SteppedSineData) -> HeldParameters | None:
     """The held values' uncertainty: the linear calibration's result (``--linear-result``,
     or the one beside the model file), else the model file's priors."""
-    path = args.linear_result
-    if path is None and args.model and not args.set:
-        beside = Path(args.model).parent / LINEAR_RESULT
-        path = str(beside) if beside.exists() else None
     orders = [float(o) for o in data.orders]
     band = (float(data.frequency_hz.min()), float(data.frequency_hz.max()))
     modes = damping_modes_in_band(model, band, max(orders))
-    if path:
+    if args.linear_result:  # named: it must be the model's
+        path = args.linear_result
         return held_from_linear_result(load_linear_result(path), model, modes, source=path)
+    beside = Path(args.model).parent / LINEAR_RESULT if args.model and not args.set else None
+    if beside is not None and beside.exists():
+        try:
+            return held_from_linear_result(
+                load_linear_result(beside), model, modes, source=str(beside)
+            )
+        except ValueError as exc:  # found, not named: another model's result
+            log.warning("%s; the model file's priors are used instead", exc)
     return held_from_priors(model)
 
 

@@ -447,6 +447,8 @@ def build_context(folder: str | Path, reference: str | Path | dict | None = None
             if _number(v) is not None
         ],
         "modal_damping": _modal_damping(lin, reference),
+        "misfit": [str(m) for m in cal.get("misfit") or []],
+        "adequate_rms": _number(cal.get("adequate_rms")),
         "reference": None,
         "crossval": None,
         "validation": None,

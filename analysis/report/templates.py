@@ -128,6 +128,16 @@ HTML = r"""<!doctype html>
 <p class="small">Folder <code>{{ folder }}</code>; all paths relative to this report's folder.</p>
 
 <div class="summary">
+{% if misfit %}
+<p><span class="badge fail">MISFIT</span> <strong>The model misfits its data: the stated intervals are
+not to be trusted.</strong> The model lacks something the structure does; <code>python -m analysis
+diagnose</code> looks for what.</p>
+<ul>{% for why in misfit %}<li>{{ why }}</li>{% endfor %}</ul>
+{% elif adequate_rms %}
+<p><span class="badge pass">adequate</span> The model fits its calibration data within
+{{ adequate_rms|g }} &times; the noise: the stated intervals carry the noise, the misfit and the
+uncertainty of the values the calibration holds.</p>
+{% endif %}
 <ul>
  <li>Measurement: <code>{{ measurement_file or "not recorded" }}</code>{% if model_source %};
      model: <code>{{ model_source }}</code>{% endif %}</li>
@@ -316,6 +326,14 @@ with &sigma; the reported 1-sigma; &ldquo;inside&rdquo;: the reference lies in t
 MARKDOWN = r"""# Calibration report
 
 Folder `{{ folder }}`; all paths relative to this report's folder.
+{% if misfit %}
+**MISFIT: the model misfits its data; the stated intervals are not to be trusted.** `python -m analysis diagnose` looks for the missing effect.
+{% for why in misfit %}
+- {{ why }}
+{% endfor %}
+{% elif adequate_rms %}
+The model fits its calibration data within {{ adequate_rms|g }} x the noise: the stated intervals carry the noise, the misfit and the uncertainty of the held values.
+{% endif %}
 
 - Measurement: `{{ measurement_file or "not recorded" }}`
 - Calibration levels: {{ calibration_levels|map("g")|join(", ") }} N{% if validation_level is not none %}; held out: {{ validation_level|g }} N{% endif %}

@@ -334,3 +334,30 @@ def test_cross_validation_notes_explain_a_scatter_beyond_fim():
     assert "acc7 @ 6 N carries 90 % of its information" in note and "misfits" not in note
     low = result([0.3, 1.0], [1.0, 1.0, 1.0], [0.5, 0.5, 0.5], even)
     assert "below 0.5" in low.notes()[0]
+
+
+def test_a_held_value_off_by_its_prior_is_carried_into_the_intervals(run):
+    """rho_corner held 23 % low (the nominal 4 000 against the truth's 5 175, within its 30 %
+    prior). Taken as exact, it moves the calibrated contact by many stated standard
+    deviations; refined jointly under its prior, the stepped sine pulls it toward the truth and
+    the stated intervals of k_c, gap and v_c hold the truth (|z| < 3)."""
+    from analysis.calibration.uncertainty import held_from_priors
+
+    model0, data = run
+    model = model0.with_values({"rho_corner": 4000.0})
+    st = CalibrationSettings(n_starts=12, seed=1)
+    exact = calibrate_nonlinear(model, data, st)
+    joint = calibrate_nonlinear(model, data, st, held=held_from_priors(model))
+
+    def z(res):
+        return {k: (res.parameters[k] - TRUTH[k]) / res.std[k] for k in TRUTH}
+
+    assert max(abs(v) for v in z(exact).values()) > 3, z(exact)
+    assert max(abs(v) for v in z(joint).values()) < 3, z(joint)
+    rho = joint.held_posterior["rho_corner"]
+    assert abs(rho - LINEAR["rho_corner"]) < abs(4000.0 - LINEAR["rho_corner"])
+    # the reported covariance is the noise's (scaled) plus what the held values add
+    assert np.all(np.diag(joint.held_cov) > 0)
+    np.testing.assert_allclose(
+        joint.cov, joint.cov_noise * np.outer(joint.noise_scale, joint.noise_scale) + joint.held_cov
+    )
