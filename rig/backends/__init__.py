@@ -18,6 +18,7 @@ from rig.backends.protocol import (
     BackendError,
     DaqBackend,
     ReadTimeoutError,
+    reference_values,
 )
 
 __all__ = [
@@ -29,6 +30,7 @@ __all__ = [
     "ReadTimeoutError",
     "available_backends",
     "open_backend",
+    "reference_values",
 ]
 
 # name -> (module, class); the module is imported by open_backend only

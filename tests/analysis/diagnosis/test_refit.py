@@ -143,7 +143,7 @@ def test_the_damping_derivative_is_that_of_solving_the_sweeps_again(runs, refere
     agrees with a central difference to the forward difference's own error (1 %)."""
     import dataclasses
 
-    from analysis.diagnosis.refit import _DampedPredictor
+    from analysis.calibration.modal_damping import DampedPredictor
     from analysis.diagnosis.verify import calibration_rows
 
     data = runs("clamp_friction")
@@ -152,7 +152,7 @@ def test_the_damping_derivative_is_that_of_solving_the_sweeps_again(runs, refere
     model, names = cand.apply(reference_model, {"f_slip": 2.5, "k_joint": 6e4})
     rows = calibration_rows(data)
     zeta = model.damping.per_mode.get(4, model.damping.default_zeta)
-    pred = _DampedPredictor(model, data).predict({"zeta_4": zeta}, [*names, "zeta_4"], rows)
+    pred = DampedPredictor(model, data).predict({"zeta_4": zeta}, [*names, "zeta_4"], rows)
     fast = pred.d_frf["zeta_4"]
 
     def at(z):
