@@ -45,6 +45,7 @@ demo: setup
 test: setup
 	QT_QPA_PLATFORM=offscreen $(PY) -m pytest -q -n auto --dist worksteal
 	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
 
 lint: setup
 	$(PY) -m ruff check .
