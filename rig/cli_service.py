@@ -219,17 +219,37 @@ def cmd_service_stop(args) -> int:
     result = {"stopped": True, "pid": status["service"]["pid"], "interrupted": None}
     if current is not None:
         result["interrupted"] = current["id"]
+        result["output_at_zero"], said = _output_state(current.get("path"))
     if args.json:
         print(json.dumps(result))
     else:
         print(f"rig service stopped (process {result['pid']})")
         if current is not None:
             print(
-                f"run {current['id']} ({current['plan']}) was under way: the output was ramped "
-                f"down and its completed steps kept; after the next start, 'rig resume "
-                f"{current['id']}' completes it"
+                f"run {current['id']} ({current['plan']}) was under way: "
+                f"{said}; its completed steps are kept; after "
+                f"the next start, 'rig resume {current['id']}' completes it"
             )
     return EXIT_OK
+
+
+def _output_state(path: str | None) -> tuple[bool | None, str]:
+    """What the interrupted run's file says of the output: ramped to 0 V, not, or unknown
+    (None: the engine records it as it stops; a file that cannot be read says nothing)."""
+    try:
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            at_zero = f.attrs.get("output_at_zero")
+    except (OSError, TypeError, ValueError):
+        at_zero = None
+    if at_zero is None:
+        return None, "the run was ended; its file does not say whether the output reached 0 V"
+    if bool(at_zero):
+        return True, "the output was ramped to 0 V (its file records it)"
+    return False, (
+        "ramping the output to 0 V FAILED (its file records it): the output may not be at 0 V"
+    )
 
 
 def cmd_service_status(args) -> int:

@@ -337,6 +337,7 @@ def test_stop_and_kill_mid_run_then_restart_reports_and_resumes(service_factory)
     r = svc.cli("service", "stop", "--json")
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["interrupted"] == run_id
+    assert json.loads(r.stdout)["output_at_zero"] is True  # read from the run's file
     assert svc.wait_exit(30) == 0
     # the service is gone: its state and the file tell what happened
     state = json.loads((svc.sdir / "state.json").read_text())
