@@ -384,10 +384,12 @@ class NonlinearCalibration:
 
 
 UNCERTAINTY_ESTIMATOR = (
-    "noise: inverse Fisher information (J^T W J)^-1 of the uncertainty-weighted metric, each "
-    "standard deviation scaled by the larger of the Birge ratio sqrt(chi2/dof) and the "
-    "cross-validation folds' scatter over it; plus G C_b G^T, the held linear parameters' "
-    "and modal damping ratios' covariance C_b carried through the sensitivities G"
+    "noise: inverse Fisher information (J^T W J)^-1 of the uncertainty-weighted metric at the "
+    "optimum with the held values fixed, each standard deviation scaled by the larger of the "
+    "Birge ratio sqrt(chi2/dof) and the cross-validation folds' scatter over it; plus what the "
+    "held linear parameters and modal damping ratios add: the joint posterior's marginal under "
+    "the linear test's posterior as prior (without a joint refinement: G C_b G^T, their "
+    "covariance C_b carried through the sensitivities G); docs/calibration.md"
 )
 
 
