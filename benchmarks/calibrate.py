@@ -24,7 +24,7 @@ import numpy as np
 from analysis.calibration.crossval import cross_validate
 from analysis.calibration.linear import calibrate_linear
 from analysis.calibration.nonlinear import CalibrationSettings, calibrate_nonlinear
-from analysis.calibration.uncertainty import damping_modes_in_band, held_from_linear_result
+from analysis.calibration.uncertainty import held_for_run
 from analysis.calibration.validation import validate
 from analysis.executors import open_executor
 from analysis.measurement_file import read_measurement
@@ -78,9 +78,7 @@ def run(quick: bool = False) -> dict:
         st = CalibrationSettings(n_starts=20 if quick else 100, seed=0)
         # as `analysis calibrate` does it: the linear result's uncertainty held, the folds
         # widening the intervals
-        band = (float(data.frequency_hz.min()), float(data.frequency_hz.max()))
-        modes = damping_modes_in_band(model, band, max(float(o) for o in data.orders))
-        held = held_from_linear_result(lin.to_json(), model, modes, source="the linear result")
+        held = held_for_run(lin.to_json(), model, data, source="the linear result")
         with open_executor(None) as ex:
             cal = calibrate_nonlinear(model, data, st, executor=ex, held=held)
             t0 = time.perf_counter()

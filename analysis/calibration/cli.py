@@ -27,8 +27,7 @@ from analysis.calibration.results import load_calibration, save_calibration
 from analysis.calibration.uncertainty import (
     ADEQUATE_RMS,
     HeldParameters,
-    damping_modes_in_band,
-    held_from_linear_result,
+    held_for_run,
     held_from_priors,
     load_linear_result,
 )
@@ -99,18 +98,13 @@ LINEAR_RESULT = "linear_calibration.json"
 def _held(args, model, data: SteppedSineData) -> HeldParameters | None:
     """The held values' uncertainty: the linear calibration's result (``--linear-result``,
     or the one beside the model file), else the model file's priors."""
-    orders = [float(o) for o in data.orders]
-    band = (float(data.frequency_hz.min()), float(data.frequency_hz.max()))
-    modes = damping_modes_in_band(model, band, max(orders))
     if args.linear_result:  # named: it must be the model's
         path = args.linear_result
-        return held_from_linear_result(load_linear_result(path), model, modes, source=path)
+        return held_for_run(load_linear_result(path), model, data, source=path)
     beside = Path(args.model).parent / LINEAR_RESULT if args.model and not args.set else None
     if beside is not None and beside.exists():
         try:
-            return held_from_linear_result(
-                load_linear_result(beside), model, modes, source=str(beside)
-            )
+            return held_for_run(load_linear_result(beside), model, data, source=str(beside))
         except ValueError as exc:  # found, not named: another model's result
             log.warning("%s; the model file's priors are used instead", exc)
     return held_from_priors(model)

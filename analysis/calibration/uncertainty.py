@@ -23,7 +23,7 @@ from __future__ import annotations
 import json
 import logging
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +38,7 @@ __all__ = [
     "HeldParameters",
     "adequate",
     "damping_modes_in_band",
+    "held_for_run",
     "held_from_linear_result",
     "held_from_priors",
     "noise_scale",
@@ -201,6 +202,14 @@ def held_from_linear_result(
     )
 
 
+def held_for_run(doc: Mapping[str, Any], model: Model, data, source: str = "") -> HeldParameters:
+    """:func:`held_from_linear_result` with the modes whose damping a stepped-sine run ``data``
+    feels (:func:`damping_modes_in_band` over its frequencies and orders)."""
+    band = (float(data.frequency_hz.min()), float(data.frequency_hz.max()))
+    modes = damping_modes_in_band(model, band, max(float(o) for o in data.orders))
+    return held_from_linear_result(doc, model, modes, source=source)
+
+
 def held_from_priors(model: Model) -> HeldParameters | None:
     """The linear parameters with a prior in the model file (``prior_rel_std``), independent,
     each with its prior standard deviation about its value; None when none has one."""
@@ -253,13 +262,11 @@ def load_linear_result(path: str | Path) -> dict[str, Any]:
 class Propagation:
     """What the held values' uncertainty does to the fitted parameters.
 
-    ``gain`` (n, k): ``d fitted / d held`` (physical units); ``cov`` (n, n): ``G C_b G^T``;
-    ``by_source`` name -> (n,) variance each held value adds.
+    ``gain`` (n, k): ``d fitted / d held`` (physical units); ``cov`` (n, n): ``G C_b G^T``.
     """
 
     gain: np.ndarray
     cov: np.ndarray
-    by_source: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def propagate_held(
@@ -298,8 +305,7 @@ def propagate_held(
     Jb = Jb / space_b.dp_dtheta(theta_b)[None, :]
     gain = -np.linalg.lstsq(Ja, Jb, rcond=None)[0]
     cov = gain @ held.cov @ gain.T
-    by_source = {n: (gain[:, j] ** 2) * held.cov[j, j] for j, n in enumerate(held.names)}
-    return Propagation(gain=gain, cov=cov, by_source=by_source)
+    return Propagation(gain=gain, cov=cov)
 
 
 def noise_scale(chi2_per_dof: float, fold_ratio: Sequence[float] | None = None) -> np.ndarray:
