@@ -16,7 +16,7 @@ import contextlib
 import logging
 import os
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from typing import TypeVar
 
 __all__ = ["open_executor", "run_jobs"]
@@ -80,7 +80,12 @@ def open_executor(
         yield pool
 
 
-def run_jobs(fn: Callable[[J], R], jobs: Sequence[J], executor: Executor | None) -> list[R]:
+def run_jobs(
+    fn: Callable[[J], R],
+    jobs: Sequence[J],
+    executor: Executor | None,
+    on_done: Callable[[int], None] | None = None,
+) -> list[R]:
     """``[fn(job) for job in jobs]``, on ``executor`` if given; results in job order.
 
     Parameters
@@ -91,8 +96,18 @@ def run_jobs(fn: Callable[[J], R], jobs: Sequence[J], executor: Executor | None)
         Picklable job specs.
     executor : Executor or None
         ``None`` runs serially in this process.
+    on_done : callable, optional
+        ``on_done(k)`` each time a job finishes, ``k`` the number finished so far (progress).
     """
     if executor is None:
-        return [fn(job) for job in jobs]
+        out = []
+        for job in jobs:
+            out.append(fn(job))
+            if on_done:
+                on_done(len(out))
+        return out
     futures = [executor.submit(fn, job) for job in jobs]
+    if on_done:
+        for k, _ in enumerate(as_completed(futures), 1):
+            on_done(k)
     return [f.result() for f in futures]

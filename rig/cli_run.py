@@ -15,9 +15,11 @@ import json
 import logging
 import math
 import sys
+import time
 from pathlib import Path
 from typing import Any, TextIO
 
+from analysis.progress import Progress, ProgressReporter, format_duration
 from rig.events import (
     Event,
     FaultRaised,
@@ -40,13 +42,29 @@ class UsageError(ValueError):
 
 class ProgressPrinter:
     """Prints run events to a stream: a rewritten progress line on a terminal, one line per
-    step otherwise (logs, pipes, a parent process reading them)."""
+    step otherwise (logs, pipes); with ``json_progress``, the steps and records as
+    :mod:`analysis.progress` JSON lines instead (``--json``: for a parent process such as
+    ``rig workflow``, which shows them with the time left). Warnings and faults are always
+    printed as text."""
 
-    def __init__(self, stream: TextIO | None = None, quiet: bool = False) -> None:
+    def __init__(
+        self, stream: TextIO | None = None, quiet: bool = False, json_progress: bool = False
+    ) -> None:
         self.stream = stream or sys.stderr
         self.quiet = quiet
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
         self._open_line = False
+        self._first: dict[str, tuple[float, int]] = {}
+        self.progress = ProgressReporter("json", self.stream) if json_progress else None
+
+    def _left(self, key: str, done: int, total: int) -> str:
+        """``", about 2 min 10 s left"`` at the pace since the first ``key`` event."""
+        now = time.perf_counter()
+        t0, d0 = self._first.setdefault(key, (now, done))
+        if done <= d0 or done >= total:
+            return ""
+        left = Progress(key, done - d0, total - d0, now - t0).left_s
+        return "" if left is None else f", about {format_duration(left)} left"
 
     def _line(self, text: str, transient: bool = False) -> None:
         if self.tty and transient:
@@ -64,20 +82,29 @@ class ProgressPrinter:
             if self.quiet:
                 return
             r, c = event.record, event.control
+            if self.progress is not None:
+                note = f"{abs(r.force[0]):.3g} N at {r.frequency_hz:.4g} Hz"
+                self.progress.update("stepped-sine steps", event.n_done, event.n_steps, note)
+                return
             its = c.iterations if c is not None else r.control_iterations
             flag = "ok" if r.control_converged else "NOT CONVERGED"
             n = f"{event.n_done}/{event.n_steps}" if event.n_steps else str(event.n_done)
             bar = _bar(event.n_done, event.n_steps)
             self._line(
                 f"step {n} {bar} plan {r.plan_index:3d}: {abs(r.force[0]):6.3f} N at "
-                f"{r.frequency_hz:8.4f} Hz, {its} it, error {r.control_error:.2%} {flag}",
+                f"{r.frequency_hz:8.4f} Hz, {its} it, error {r.control_error:.2%} {flag}"
+                f"{self._left('steps', event.n_done, event.n_steps) if event.n_steps else ''}",
                 transient=True,
             )
         elif isinstance(event, RecordAcquired):
-            if not self.quiet:
-                self._line(
-                    f"record {event.index + 1}/{event.n_records} ({event.purpose})", transient=True
-                )
+            if self.quiet:
+                return
+            done, total = event.index + 1, event.n_records
+            if self.progress is not None:
+                self.progress.update(f"{event.purpose} records", done, total)
+            else:
+                left = self._left(event.purpose, done, total)
+                self._line(f"record {done}/{total} ({event.purpose}){left}", transient=True)
         elif isinstance(event, PretestFinished):
             if not self.quiet:
                 self._line("pretest:")
@@ -205,7 +232,7 @@ def _run(args, kind: str) -> int:
     if not getattr(args, "verbose", False):
         logging.getLogger("rig").setLevel(logging.ERROR)  # the progress printer shows warnings
     info = {"backend": args.backend, "backend_options": _jsonable(options), "argv": sys.argv[1:]}
-    printer = ProgressPrinter(quiet=args.quiet)
+    printer = ProgressPrinter(quiet=args.quiet, json_progress=args.json)
     with open_rig(
         args.backend,
         setup,

@@ -19,6 +19,8 @@ from rig.signals.multisine import MultisineSpec, as_orders
 from rig.signals.random import RANDOM_KINDS
 
 __all__ = [
+    "MAX_PLAN_STEPS",
+    "PlanTooLarge",
     "DIRECTIONS",
     "AcquisitionSettings",
     "ControlPolicy",
@@ -34,6 +36,14 @@ __all__ = [
 
 DIRECTIONS = ("up", "down", "up-down", "down-up")
 _FREQ_DECIMALS = 6  # frequencies closer than 1e-6 Hz are the same step
+#: The most steps a stepped-sine plan may hold. A step takes a second or more (settling and
+#: averaging), so this is over a day of shaking; a plan beyond it is a mistyped ``step_hz``,
+#: refused before its frequencies are listed (a 1e-9 Hz step over 21-40 Hz would need 142 GiB).
+MAX_PLAN_STEPS = 100_000
+
+
+class PlanTooLarge(ValueError):
+    """A plan (or one frequency range of it) with more than :data:`MAX_PLAN_STEPS` steps."""
 
 
 def _positive(owner: str, name: str, value: float) -> None:
@@ -75,11 +85,22 @@ class FrequencyRange:
                 f"FrequencyRange: stop_hz {self.stop_hz} is below start_hz {self.start_hz}"
             )
         n = (self.stop_hz - self.start_hz) / self.step_hz
+        if n + 1 > MAX_PLAN_STEPS:
+            raise PlanTooLarge(
+                f"FrequencyRange: {self.start_hz} to {self.stop_hz} Hz in {self.step_hz} Hz "
+                f"steps is {round(n) + 1:,} frequencies, more than a plan may hold "
+                f"({MAX_PLAN_STEPS:,} steps): check step_hz"
+            )
         if abs(n - round(n)) > 1e-6 * max(1.0, n):
             raise ValueError(
                 f"FrequencyRange: {self.start_hz} to {self.stop_hz} Hz is not a whole number of "
                 f"{self.step_hz} Hz steps"
             )
+
+    @property
+    def count(self) -> int:
+        """Number of frequencies (without listing them)."""
+        return round((self.stop_hz - self.start_hz) / self.step_hz) + 1
 
     def frequencies_hz(self) -> np.ndarray:
         """The frequencies, ascending, shape (n,) [Hz]."""

@@ -48,12 +48,14 @@ import numpy as np
 
 from rig.plan_settings import (
     DIRECTIONS,
+    MAX_PLAN_STEPS,
     AcquisitionSettings,
     ControlPolicy,
     ExcitationSettings,
     FrequencyPlan,
     FrequencyRange,
     Limits,
+    PlanTooLarge,
     PretestSettings,
     RandomAcquisition,
     RandomExcitation,
@@ -63,6 +65,8 @@ from rig.tomlconfig import ConfigError
 
 __all__ = [
     "DIRECTIONS",
+    "MAX_PLAN_STEPS",
+    "PlanTooLarge",
     "AcquisitionSettings",
     "ConfigError",
     "ControlPolicy",
@@ -166,6 +170,12 @@ class SteppedSinePlan:
     def __post_init__(self) -> None:
         object.__setattr__(self, "points", tuple(self.points))
         _check_common("SteppedSinePlan", self.name, self.setup, self.points, self.sample_rate_hz)
+        n = self.step_count_bound()
+        if n > MAX_PLAN_STEPS:
+            raise PlanTooLarge(
+                f"plan {self.name!r} has {n:,} steps, more than the maximum of "
+                f"{MAX_PLAN_STEPS:,} (levels x sweeps x frequencies): check its step_hz"
+            )
         s = self.control.settings
         if s.orders != self.excitation.orders or s.max_drive_v != self.limits.drive_peak_v:
             settings = dataclasses.replace(
@@ -178,6 +188,14 @@ class SteppedSinePlan:
     @property
     def levels_n(self) -> tuple[float, ...]:
         return self.excitation.levels_n
+
+    def step_count_bound(self) -> int:
+        """Steps counted from the settings without listing them: levels x sweeps x each
+        range's frequencies (a frequency two ranges share counted twice, so an upper bound of
+        :attr:`n_steps`, exact for ranges that do not overlap)."""
+        fr = self.frequencies
+        sweeps = 2 if "-" in fr.direction else 1
+        return len(self.excitation.levels_n) * sweeps * sum(r.count for r in fr.ranges)
 
     def steps(self) -> tuple[PlannedStep, ...]:
         """Every step in the order it is run: for each level, each sweep, each frequency."""

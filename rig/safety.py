@@ -12,9 +12,12 @@
   was (``SILENT_DROP``) (fault ``sensor``; on the drive-force channel, one measurement at the
   noise level: ``no-force``); a live sensor that responds weakly (an antiresonance, a low
   level) stays where it was from step to step, a dead one drops to its noise;
-  and a waveform flat-topped at both peaks at a tenth of the channel's input range or more,
-  the mark of a saturated sensor (``clipping``; a structure's own symmetric flat tops, a
-  slipping joint's, sit far below a sensor's output swing).
+  and a waveform flat-topped at both peaks, the mark of a saturated sensor (``clipping``):
+  near the signal chain's full scale (the sensor's output swing or the input range) a slight
+  plateau is enough; far below it a sensor saturates only when it is faulty, and a structure's
+  own waveform can flatten its peaks (harmonics in phase), so the plateau must be flatter than
+  smooth harmonics make a peak (:func:`peak_exponent`; ``docs/acquisition.md``, "Saturated
+  sensors").
 
 Process-level safety: :func:`deferred_interrupts` holds Ctrl-C while the output ramps down or a
 step is written; :func:`interrupt_handlers` turns Ctrl-C and SIGTERM into a clean abort of a
@@ -41,8 +44,9 @@ __all__ = [
     "SignalChecks",
     "deferred_interrupts",
     "displacement_peak",
+    "flat_tops",
     "interrupt_handlers",
-    "plateau_fraction",
+    "peak_exponent",
     "resolve_limits",
 ]
 
@@ -51,12 +55,18 @@ logger = logging.getLogger(__name__)
 SILENT_SNR = 3.0  # a fundamental below this many noise standard errors is "no response"
 SILENT_STRIKES = 2  # consecutive silent measurements before a channel counts as dead
 SILENT_DROP = 0.2  # ... and only if its response per newton fell below this share of before
-PLATEAU_RATIO = 1.8  # flat at both peaks this many times longer than a sine: saturated
-#: ... at a level of at least this share of the channel's input range: a sensor saturates at its
-#: output swing, which the input range is set to hold; a symmetric flat top far below it is the
-#: structure's own motion (a joint that slips, a stop on either side), not a saturated sensor
-PLATEAU_MIN_RANGE = 0.1
+#: A waveform whose peaks are flatter than this (:func:`peak_exponent`) at a level of at least
+#: ``PLATEAU_NEAR_FULL_SCALE`` of the channel's full scale: a sensor at the end of its swing
+#: (a sine cut at about 92 % of its amplitude).
+PLATEAU_EXPONENT = 4.0
+PLATEAU_NEAR_FULL_SCALE = 0.1
+#: ... flatter than this at any level: saturated whatever the level. Smooth peaks from orders 1
+#: to 5 stay at 5 or below however they combine; a plateau needs a constant net force on the
+#: point over part of every cycle, which no contact or friction law makes of an acceleration. A
+#: sine cut at 80 % of its amplitude (order 1 then 10 % low) reaches it without noise.
+PLATEAU_EXPONENT_ANY_LEVEL = 6.0
 _PLATEAU_HARMONICS = 20  # harmonics of the base kept to denoise the period average
+_PEAK_DEPTHS = 10.0  # the two depths below a peak whose times give its exponent
 
 
 def _describe(channel) -> str:
@@ -178,8 +188,18 @@ def _tukey(n: int, alpha: float) -> np.ndarray:
     return w
 
 
-def plateau_fraction(period_waveform: np.ndarray, noise_rms: float) -> float:
-    """How much flatter than a sine a waveform is at both its peaks (saturation).
+def peak_exponent(period_waveform: np.ndarray, noise_rms: float) -> float:
+    """How flat a waveform is at both its peaks: the exponent n of ``time ~ depth^(1/n)``.
+
+    The time a waveform spends within a depth ``d`` of its maximum grows like ``d^(1/n)``,
+    where ``n`` is the order of the first derivative that does not vanish at the peak: 2 for a
+    sine's rounded peak, 4 for the flattest peak orders 1 and 3 can make together (a third
+    harmonic of 1/9 in phase), 6 with order 5 as well, and without bound on a plateau (a sine
+    clipped at 80 % of its amplitude gives about 6, at 60 % about 10). The exponent is read
+    from the times within ``b`` and ``min(10 b, amplitude / 2)`` of each peak, ``b = max(2 %
+    of the amplitude, 3 noise_rms)``, scaled so that a sine reads 2 at any depths, and the
+    smaller of the two peaks' is returned. Unlike the time at the peak
+    alone it does not mistake a smooth flat peak for a plateau.
 
     Parameters
     ----------
@@ -191,27 +211,31 @@ def plateau_fraction(period_waveform: np.ndarray, noise_rms: float) -> float:
     Returns
     -------
     float
-        The smaller of the shares of samples within ``band = 1 % of the amplitude + 3
-        noise_rms`` of the maximum and of the minimum, over the share a sine spends there,
-        ``arccos(1 - band / amplitude) / pi``: about 1 for a sine, 2 for a sine saturated at
-        80 % of its amplitude, 3 at 50 %. 0 when the peaks are not symmetric (a saturated
-        sensor clips both ways at about the same level; the flat top of a nonlinear response
-        is one-sided); NaN when the band exceeds 15 % of the amplitude (too noisy to tell).
+        The exponent; 0 when the peaks are not symmetric (a saturated sensor clips both ways at
+        about the same level; the flat top of a nonlinear response is one-sided); NaN when the
+        noise band exceeds 10 % of the amplitude (too noisy to tell).
     """
     w = np.asarray(period_waveform, dtype=float)
     hi, lo = float(np.max(w)), float(np.min(w))
     amp = 0.5 * (hi - lo)
     if amp <= 0:
         return math.nan
-    band = 0.01 * amp + 3.0 * noise_rms
-    if band > 0.15 * amp:
+    band = max(0.02 * amp, 3.0 * noise_rms)
+    if band > 0.1 * amp:
         return math.nan
     if abs(hi + lo) > max(0.05 * amp, band):
         return 0.0
-    top = float(np.mean(w >= hi - band))
-    bottom = float(np.mean(w <= lo + band))
-    sine = math.acos(1.0 - band / amp) / math.pi
-    return min(top, bottom) / sine
+    deep = min(_PEAK_DEPTHS * band, 0.5 * amp)
+
+    def near_peaks(depth: float) -> float:
+        return float(min(np.mean(w >= hi - depth), np.mean(w <= lo + depth)))
+
+    inner, outer = near_peaks(band), near_peaks(deep)
+    if outer <= inner:
+        return math.inf
+    # a sine's times at the same depths, so that a sine reads 2 at any depth
+    sine = math.acos(1.0 - deep / amp) / math.acos(1.0 - band / amp)
+    return 2.0 * math.log(sine) / math.log(outer / inner)
 
 
 class SignalChecks:
@@ -391,32 +415,75 @@ class SignalChecks:
         self._check_saturation(window, samples_per_period, estimate)
 
     def _check_saturation(self, window: np.ndarray, n: int, estimate) -> None:
-        periods = window.shape[0] // n
-        if periods < 1:
-            return
-        mean_period = window[: periods * n].reshape(periods, n, -1).mean(axis=0)
-        spectrum = np.fft.rfft(mean_period, axis=0)
-        keep = min(_PLATEAU_HARMONICS, spectrum.shape[0] - 1)
-        spectrum[keep + 1 :] = 0.0
-        spectrum[0] = 0.0
-        smooth = np.fft.irfft(spectrum, n, axis=0)
-        residual = estimate.nonperiodic_rms * math.sqrt(2.0 * keep / n) / math.sqrt(periods)
+        levels, exponents = flat_tops(window, n, estimate.nonperiodic_rms)
         for c, ch in enumerate(self.channels):
-            if ch.quantity == "voltage":
+            if ch.quantity == "voltage" or np.isnan(exponents[c]):
                 continue
-            level = 0.5 * float(np.ptp(smooth[:, c]))
-            if level < PLATEAU_MIN_RANGE * ch.range_units:
+            near = levels[c] >= PLATEAU_NEAR_FULL_SCALE * ch.full_scale_units
+            if exponents[c] <= (PLATEAU_EXPONENT if near else PLATEAU_EXPONENT_ANY_LEVEL):
                 continue
-            ratio = plateau_fraction(smooth[:, c], float(np.nan_to_num(residual[c])))
-            if ratio > PLATEAU_RATIO:
-                raise RunFault(
-                    "clipping",
-                    f"{_describe(ch)} is flat-topped at about +-{level:.3g} {ch.unit} "
-                    f"({ratio:.1f} x as long at its peaks as a sine){self._where()}: the sensor "
-                    "saturates (its measuring range is exceeded); use a less sensitive sensor or "
-                    "lower the level",
-                    ch.name,
+            what = "force gauge" if ch.quantity == "force" else "sensor"
+            if near:
+                why = (
+                    f"the {what} saturates (its measuring range is exceeded); use a less "
+                    "sensitive one or lower the level"
                 )
+            else:
+                why = (
+                    f"that is {levels[c] / ch.full_scale_units:.1%} of its full scale "
+                    f"(+-{ch.full_scale_units:.4g} {ch.unit}), so the {what} saturates below "
+                    "its range: it is faulty (a damaged element, too little IEPE current for "
+                    "its cable, a bias drifted toward the rail) or loosely mounted; check or "
+                    "replace it"
+                )
+            raise RunFault(
+                "clipping",
+                f"{_describe(ch)} is flat-topped at about +-{levels[c]:.3g} {ch.unit} "
+                f"(peaks of order {exponents[c]:.3g}; a sine's are of order 2)"
+                f"{self._where()}: {why}",
+                ch.name,
+            )
+
+
+def flat_tops(
+    window: np.ndarray, samples_per_period: int, nonperiodic_rms: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Half the peak-to-peak level and the :func:`peak_exponent` of every channel.
+
+    Parameters
+    ----------
+    window : ndarray, shape (n, C)
+        Samples of whole base periods.
+    samples_per_period : int
+    nonperiodic_rms : ndarray, shape (C,)
+        RMS of what is not periodic in the base period (noise), per channel.
+
+    Returns
+    -------
+    levels, exponents : ndarray, shape (C,)
+        The period average, its harmonics above ``_PLATEAU_HARMONICS`` removed with Lanczos'
+        sigma factors: a plain cut rings (Gibbs) on a plateau's corners and hides a sensor
+        clipped hard at low noise. NaN where there is not one period.
+    """
+    n = samples_per_period
+    periods = window.shape[0] // n
+    n_channels = window.shape[1]
+    if periods < 1:
+        return np.full(n_channels, np.nan), np.full(n_channels, np.nan)
+    mean_period = window[: periods * n].reshape(periods, n, -1).mean(axis=0)
+    spectrum = np.fft.rfft(mean_period, axis=0)
+    keep = min(_PLATEAU_HARMONICS, spectrum.shape[0] - 1)
+    k = np.arange(spectrum.shape[0])
+    sigma = np.where(k <= keep, np.sinc(k / (keep + 1)), 0.0)
+    spectrum *= sigma[:, None]
+    spectrum[0] = 0.0
+    smooth = np.fft.irfft(spectrum, n, axis=0)
+    residual = np.asarray(nonperiodic_rms) * math.sqrt(2.0 * keep / n) / math.sqrt(periods)
+    levels = 0.5 * np.ptp(smooth, axis=0)
+    exponents = np.array(
+        [peak_exponent(smooth[:, c], float(np.nan_to_num(residual[c]))) for c in range(n_channels)]
+    )
+    return levels, exponents
 
 
 # ------------------------------------------------------------------------ signals

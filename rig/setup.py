@@ -99,6 +99,11 @@ class ChannelSetup:
         ``"mV/N"`` for force, ``"mV/g"`` for acceleration, ``"V/V"`` for voltage.
     range_v : float
         Input range of the ADC [V] (symmetric).
+    output_swing_v : float
+        The sensor's output swing [V] from its data sheet (a 10 mV/g accelerometer rated
+        +-500 g swings +-5 V); 0 when not known, the input range is then taken to hold it. The
+        saturation check (:mod:`rig.safety`) judges a flat-topped waveform against the smaller
+        of the two.
     role : {"drive-force", "drive-acceleration", "response", "reference"}
         ``drive-force``: the force gauge at the drive point (exactly one per setup).
     iepe : bool
@@ -120,6 +125,7 @@ class ChannelSetup:
     sensitivity: float
     sensitivity_unit: str
     range_v: float = 5.0
+    output_swing_v: float = 0.0
     role: str = "response"
     iepe: bool = True
     model: str = ""
@@ -148,6 +154,10 @@ class ChannelSetup:
                 f"got {self.sensitivity_unit!r}"
             )
         _check_positive(owner, "range_v", self.range_v)
+        if not (math.isfinite(self.output_swing_v) and self.output_swing_v >= 0):
+            raise ValueError(
+                f"{owner}.output_swing_v: must be >= 0 (0: not known), got {self.output_swing_v!r}"
+            )
         if self.role not in ROLES:
             raise ValueError(f"{owner}.role: expected one of {ROLES}, got {self.role!r}")
         if self.role == "drive-force" and self.quantity != "force":
@@ -163,6 +173,7 @@ class ChannelSetup:
             raise ValueError(f"{owner}.mass_kg: must be >= 0, got {self.mass_kg!r}")
         object.__setattr__(self, "sensitivity", float(self.sensitivity))
         object.__setattr__(self, "range_v", float(self.range_v))
+        object.__setattr__(self, "output_swing_v", float(self.output_swing_v))
         object.__setattr__(self, "mass_kg", float(self.mass_kg))
 
     @property
@@ -183,6 +194,13 @@ class ChannelSetup:
     def range_units(self) -> float:
         """Input range in channel units (N, m/s^2, V)."""
         return self.range_v * self.units_per_volt
+
+    @property
+    def full_scale_units(self) -> float:
+        """Where the signal chain saturates, in channel units: the smaller of the sensor's
+        output swing (when known) and the input range."""
+        swing = self.output_swing_v if self.output_swing_v > 0 else self.range_v
+        return min(swing, self.range_v) * self.units_per_volt
 
     def ai_config(self) -> AIChannelConfig:
         """The DAQ input channel."""
@@ -457,6 +475,7 @@ _CHANNEL_KEYS = {
     "sensitivity": ("number", ...),
     "sensitivity_unit": ("text", ...),
     "range_v": ("number", 5.0),
+    "output_swing_v": ("number", 0.0),
     "role": ("text", "response"),
     "iepe": ("flag", True),
     "model": ("text", ""),

@@ -23,10 +23,12 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
 from analysis.paper import PAPER_LINEAR, PAPER_NONLINEAR, TABLE4_BEST
+from analysis.progress import ProgressReporter, format_duration, parse_line
 
 __all__ = ["analyse_runs", "run_workflow", "verdict"]
 
@@ -39,19 +41,42 @@ class StageError(RuntimeError):
 
 
 def _stage(name: str, argv: list[str], log: list[dict], quiet: bool) -> dict:
+    """Run one command of the workflow with ``--json``: its last JSON line is the result, its
+    progress lines (:mod:`analysis.progress`) are shown as they come, the rest of its error
+    output is kept for the message if it fails."""
     t0 = time.perf_counter()
     if not quiet:
         print(f"== {name}: {' '.join(argv[2:])}", file=sys.stderr, flush=True)
-    r = subprocess.run([sys.executable, *argv, "--json"], capture_output=True, text=True)
+    shown = ProgressReporter("none" if quiet else "text", sys.stderr, prefix="   ")
+    other: list[str] = []
+    with subprocess.Popen(
+        [sys.executable, *argv, "--json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        bufsize=1,
+    ) as proc:
+        stdout: list[str] = []
+        reader = threading.Thread(target=lambda: stdout.append(proc.stdout.read()), daemon=True)
+        reader.start()
+        for line in proc.stderr:
+            progress = parse_line(line)
+            if progress is None:
+                other.append(line)
+            else:
+                shown.show(progress)
+        reader.join()
+        returncode = proc.wait()
+    shown.close()
     dt = time.perf_counter() - t0
-    if r.returncode != 0:
-        tail = r.stderr.strip()[-2000:]
-        raise StageError(f"stage '{name}' failed (exit {r.returncode}):\n{tail}")
-    lines = [ln for ln in r.stdout.strip().splitlines() if ln.startswith("{")]
+    if returncode != 0:
+        tail = "".join(other).strip()[-2000:]
+        raise StageError(f"stage '{name}' failed (exit {returncode}):\n{tail}")
+    lines = [ln for ln in "".join(stdout).strip().splitlines() if ln.startswith("{")]
     out = json.loads(lines[-1]) if lines else {}
     log.append({"stage": name, "seconds": round(dt, 2), "argv": argv})
     if not quiet:
-        print(f"   done in {dt:.1f} s", file=sys.stderr, flush=True)
+        print(f"   done in {format_duration(dt)}", file=sys.stderr, flush=True)
     return out
 
 
@@ -89,7 +114,7 @@ def run_workflow(
     _stage(
         "random test",
         ["-m", "rig", "linear", str(linear_plan), "--backend", backend, "--out", str(lin_run),
-         "--overwrite", "--quiet", *rig_args],
+         "--overwrite", *rig_args],
         log,
         quiet,
     )  # fmt: skip
@@ -97,7 +122,7 @@ def run_workflow(
     run = _stage(
         "stepped-sine run",
         ["-m", "rig", "run", str(plan), "--backend", backend, "--out", str(paper_run),
-         "--overwrite", "--quiet", *rig_args],
+         "--overwrite", *rig_args],
         log,
         quiet,
     )  # fmt: skip

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import logging
-import sys
 import time
 from pathlib import Path
 
@@ -36,32 +35,40 @@ from analysis.executors import open_executor
 from analysis.measurement_file import SteppedSineData, read_measurement
 from analysis.measurement_file.status import require_steps
 from analysis.model import load_model
+from analysis.progress import ProgressReporter
 
 __all__ = ["add_parsers"]
 
 log = logging.getLogger(__name__)
 
 
-def _progress(quiet: bool):
-    state = {"t0": time.perf_counter()}
+def _progress(reporter: ProgressReporter):
+    """``calibrate_nonlinear``'s progress callback, shown by ``reporter``."""
 
     def show(stage: str, info: dict) -> None:
-        if quiet:
-            return
-        t = time.perf_counter() - state["t0"]
-        if stage == "lhs":
-            print(
-                f"[{t:6.1f} s] {info['n']} Latin hypercube starts evaluated; best metric "
-                f"{info['best_cost']:.4g}",
-                file=sys.stderr,
+        if stage == "lhs_progress":
+            reporter.update("Latin hypercube starts", info["done"], info["total"])
+        elif stage == "lhs":
+            reporter.update(
+                "Latin hypercube starts",
+                info["n"],
+                info["n"],
+                f"best metric {info['best_cost']:.4g}",
             )
-        elif stage == "lm":
-            print(
-                f"[{t:6.1f} s] LM iteration {info['iteration']}: metric {info['cost']:.6g}",
-                file=sys.stderr,
-            )
+        elif stage in ("lm", "joint"):
+            what = "LM iterations" if stage == "lm" else "joint refinement iterations"
+            reporter.update(what, info["iteration"], None, f"metric {info['cost']:.6g}")
 
     return show
+
+
+def _reporter(args) -> ProgressReporter:
+    """Progress as text for a person, as JSON lines with ``--json`` (for ``rig workflow``)."""
+    return ProgressReporter("json" if args.json else "text", prefix="calibration: ")
+
+
+def _folds_progress(reporter: ProgressReporter):
+    return lambda done, total: reporter.update("cross-validation folds", done, total)
 
 
 def _stepped(path: str) -> SteppedSineData:
@@ -150,9 +157,9 @@ def _print_result(res, model) -> None:
               "for the missing effect")  # fmt: skip
 
 
-def _crossval_into(res, model, data, executor, out: Path):
+def _crossval_into(res, model, data, executor, out: Path, reporter: ProgressReporter):
     """Cross-validate ``res``, widen its intervals by the folds' evidence, write the files."""
-    cv = cross_validate(model, data, res, executor=executor)
+    cv = cross_validate(model, data, res, executor=executor, on_done=_folds_progress(reporter))
     res.widen_with_folds(cv.std_ratio, [cv.folds[j] for j in cv.misfit_folds()])
     return cv, _write_crossval(cv, out)
 
@@ -177,14 +184,16 @@ def cmd_calibrate(args) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     cv = None
+    reporter = _reporter(args)
     with open_executor(args.workers, args.scheduler) as ex:
         res = calibrate_nonlinear(
-            model, data, st, executor=ex, progress=_progress(args.json), held=held
+            model, data, st, executor=ex, progress=_progress(reporter), held=held
         )
         if not args.no_crossval:
             t1 = time.perf_counter()
-            cv, cv_fig = _crossval_into(res, model, data, ex, out)
+            cv, cv_fig = _crossval_into(res, model, data, ex, out, reporter)
             res.timings["crossval_s"] = time.perf_counter() - t1
+    reporter.close()
     files = save_calibration(res, model, out, args.run)
     fig1 = plot_convergence([h["cost"] for h in res.lm.history], out / "convergence.png")
     fig2 = _fit_figure(
@@ -245,8 +254,10 @@ def cmd_crossval(args) -> dict:
     res, model, data_path = load_calibration(args.result)
     data = _stepped(args.run or data_path)
     out = Path(args.result).parent
+    reporter = _reporter(args)
     with open_executor(args.workers, args.scheduler) as ex:
-        cv, fig = _crossval_into(res, model, data, ex, out)
+        cv, fig = _crossval_into(res, model, data, ex, out, reporter)
+    reporter.close()
     if not args.run:  # the calibration's own data: its stated intervals take the evidence
         save_calibration(res, model, out, data_path)
     if not args.json:

@@ -20,8 +20,10 @@ B. Efron, C. Stein, "The jackknife estimate of variance", Ann. Statist. 9 (1981)
 from __future__ import annotations
 
 import concurrent.futures as cf
+import functools
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,6 +38,7 @@ from analysis.calibration.nonlinear import (
 )
 from analysis.calibration.objective import FRFObjective
 from analysis.calibration.uncertainty import adequate
+from analysis.executors import run_jobs
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 
@@ -188,6 +191,7 @@ def cross_validate(
     *,
     executor: cf.Executor | None = None,
     max_iterations: int = 20,
+    on_done: Callable[[int, int], None] | None = None,
 ) -> CrossValidation:
     """K-fold cross-validation started from the calibrated optimum.
 
@@ -199,6 +203,8 @@ def cross_validate(
     calibration : NonlinearCalibration
     executor : concurrent.futures.Executor, optional
         Runs the folds in parallel.
+    on_done : callable, optional
+        ``on_done(done, total)`` as folds finish (progress).
     """
     t0 = time.perf_counter()
     model = calibration.conditioned(model)
@@ -232,11 +238,9 @@ def cross_validate(
         )
     bounds = space.theta_bounds()
     x0 = calibration.lm.x
-    if executor is None:
-        out = [_fold(s, x0, bounds, max_iterations) for s in specs]
-    else:
-        futures = [executor.submit(_fold, s, x0, bounds, max_iterations) for s in specs]
-        out = [f.result() for f in futures]
+    job = functools.partial(_fold, theta0=x0, bounds=bounds, max_iterations=max_iterations)
+    tick = (lambda k: on_done(k, len(specs))) if on_done else None
+    out = run_jobs(job, specs, executor, tick)
     stuck = [name for name, (_, accepted) in zip(folds, out, strict=True) if accepted == 0]
     if stuck:
         log.warning(

@@ -447,14 +447,27 @@ def evaluate_costs(
     thetas: np.ndarray,
     executor: cf.Executor | None = None,
     local: FRFObjective | None = None,
+    on_done: Callable[[int, int], None] | None = None,
 ) -> np.ndarray:
-    """Metric at many scaled points, on ``executor`` if given (chunks per worker)."""
+    """Metric at many scaled points, on ``executor`` if given (chunks per worker);
+    ``on_done(done, total)`` as points are finished (progress)."""
+    total = len(thetas)
     if executor is None:
         obj = local or spec.build()
-        return np.array([obj.cost(t) for t in thetas])
-    n_chunks = max(1, min(len(thetas), 4 * (getattr(executor, "_max_workers", 2) or 2)))
-    chunks = np.array_split(thetas, n_chunks)
-    futures = [executor.submit(_evaluate_chunk, spec, c) for c in chunks if len(c)]
+        costs = []
+        for t in thetas:
+            costs.append(obj.cost(t))
+            if on_done:
+                on_done(len(costs), total)
+        return np.array(costs)
+    n_chunks = max(1, min(total, 4 * (getattr(executor, "_max_workers", 2) or 2)))
+    chunks = [c for c in np.array_split(thetas, n_chunks) if len(c)]
+    futures = {executor.submit(_evaluate_chunk, spec, c): len(c) for c in chunks}
+    if on_done:
+        done = 0
+        for f in cf.as_completed(futures):
+            done += futures[f]
+            on_done(done, total)
     return np.concatenate([f.result() for f in futures])
 
 
@@ -511,7 +524,8 @@ def calibrate_nonlinear(
     starts = latin_hypercube(dists, st.n_starts, st.seed, space.names)
     lo_t, hi_t = space.theta_bounds()
     thetas = np.clip(space.to_theta(starts), lo_t, hi_t)
-    costs = evaluate_costs(spec, thetas, executor, objective)
+    tick = (lambda k, n: progress("lhs_progress", {"done": k, "total": n})) if progress else None
+    costs = evaluate_costs(spec, thetas, executor, objective, on_done=tick)
     lhs_s = time.perf_counter() - t0
     if not np.isfinite(costs).any():
         raise RuntimeError("no Latin hypercube start gave a converged model response")

@@ -13,6 +13,7 @@ from rig.control.force_controller import ControlSettings
 from rig.events import FaultRaised, RunWarning, StepFinished
 from rig.plans import ControlPolicy, Limits, ResponseLimit
 from rig.runner import TestRun, open_rig
+from rig.safety import PLATEAU_EXPONENT, PLATEAU_EXPONENT_ANY_LEVEL, flat_tops
 from sim_backend.amplifier import AmplifierModel
 from sim_backend.daq import FaultSwitches, SimulatedDaq
 from sim_backend.serial_amplifier import SimulatedAmplifierPort
@@ -132,19 +133,64 @@ def test_saturated_sensor_is_reported_as_clipping(tmp_path):
     assert_ramped_to_zero(daq)
 
 
-def test_a_flat_top_far_below_the_input_range_is_the_structure_not_a_saturated_sensor(tmp_path):
-    # the same cut-off at 12 m/s^2 on the shipped 10 mV/g sensor is 0.12 V of its 5 V range
-    # (2.4 %): no sensor's output swing ends there, so it is the structure's own flat top (a
-    # joint that slips on both sides) and the run goes on
+def test_a_sensor_saturating_far_below_its_range_is_reported_as_faulty(tmp_path):
+    # the same cut-off at 12 m/s^2 on the shipped 10 mV/g sensor (+-5 V output swing: +-490 g)
+    # is 0.25 % of its full scale: no range explains it, the sensor is faulty; order 1 of the
+    # clipped 25 m/s^2 would be 40 % low and order 3 several times too high if it were stored
     setup = setup_at()
+    tip = next(c for c in setup.channels if c.name == "acc7")
+    assert tip.output_swing_v == 5.0 and tip.full_scale_units > 4000.0
     plan = reduced_plan(levels_n=(8.0,), ranges=((21.0, 24.0, 3.0),))
     daq = sim_daq(setup, record_output=True)
     clip = _after_step(1, lambda: daq.set_faults(FaultSwitches(clip_levels={"acc7": 12.0})))
     summary, run, daq = run_on_sim(
         plan, tmp_path / "c.h5", setup=setup, daq=daq, subscribers=[clip]
     )
-    assert summary.status == "success", summary.message
-    assert read_measurement(tmp_path / "c.h5").n_steps == 2
+    assert summary.fault_kind == "clipping"
+    phrases = ("'acc7' (point 7", "flat-topped", "saturates below its range", "faulty")
+    _ended(tmp_path / "c.h5", "aborted", *phrases, steps=1)
+    assert_ramped_to_zero(daq)
+
+
+def test_a_saturated_force_gauge_is_named_as_such_not_as_lost_force(tmp_path):
+    setup = setup_at()
+    plan = reduced_plan(levels_n=(8.0,), ranges=((21.0, 24.0, 3.0),))
+    daq = sim_daq(setup, record_output=True)
+    clip = _after_step(1, lambda: daq.set_faults(FaultSwitches(clip_levels={"force3": 4.0})))
+    summary, run, daq = run_on_sim(
+        plan, tmp_path / "f.h5", setup=setup, daq=daq, subscribers=[clip]
+    )
+    assert summary.fault_kind == "clipping", summary.message
+    data = _ended(tmp_path / "f.h5", "aborted", "'force3'", "force gauge saturates", steps=1)
+    assert "no force" not in data.exit_message
+    assert_ramped_to_zero(daq)
+
+
+def _period(y):
+    return np.tile(y, 8)[:, None]
+
+
+def test_peak_exponent_tells_a_plateau_from_smooth_flat_peaks():
+    # smooth peaks: 2 for a sine, about 3.5 for the flattest peak orders 1 and 3 can make
+    # (third harmonic 1/9 in phase), under 5 with order 5 as well; a clipped sine grows without
+    # bound as the cut deepens. Tolerances: the exponent is read from two sample counts.
+    n = 1024
+    t = 2 * np.pi * np.arange(n) / n
+    noise = np.array([0.0])
+
+    def exponent(y):
+        return float(flat_tops(_period(y), n, noise)[1][0])
+
+    assert exponent(np.sin(t)) == pytest.approx(2.0, abs=0.1)
+    smooth = [np.sin(t) + c * np.sin(3 * t) for c in (0.05, 0.1, 1 / 9, 0.14, 0.2)]
+    smooth.append(np.sin(t) + np.sin(3 * t) / 6 + np.sin(5 * t) / 50)  # flat to order 6
+    assert max(exponent(y) for y in smooth) < 5.1 < PLATEAU_EXPONENT_ANY_LEVEL
+    cuts = {p: exponent(np.clip(np.sin(t), -p, p)) for p in (0.9, 0.75, 0.6, 0.48, 0.3)}
+    assert cuts[0.9] > PLATEAU_EXPONENT
+    assert all(cuts[p] > PLATEAU_EXPONENT_ANY_LEVEL for p in (0.6, 0.48, 0.3)), cuts
+    assert list(cuts.values()) == sorted(cuts.values())
+    # one-sided flat top (a stop on one side): not a saturated sensor
+    assert exponent(np.minimum(np.sin(t), 0.5) + 0.25) == 0.0
 
 
 def test_channel_beyond_its_input_range(tmp_path):

@@ -123,6 +123,37 @@ def test_own_plan_file(tmp_path):
         load_plan(tmp_path / "missing.toml")
 
 
+def test_a_plan_beyond_the_step_limit_is_refused_before_its_steps_are_listed(tmp_path):
+    from rig.plans import MAX_PLAN_STEPS, PlanTooLarge
+
+    # one range of 19 billion frequencies: refused from its settings, at its key
+    text = builtin_plans()["quick"].read_text()
+    data = _paper_dict()
+    data["frequencies"]["ranges"] = [{"start_hz": 21.0, "stop_hz": 40.0, "step_hz": 1e-9}]
+    with pytest.raises(ConfigError) as err:
+        plan_from_dict(data, "plan big.toml")
+    assert "plan big.toml: frequencies.ranges[0]" in str(err.value)
+    assert "19,000,000,001 frequencies" in str(err.value) and "step_hz" in str(err.value)
+    assert isinstance(err.value.__cause__, PlanTooLarge)
+    # ranges within the limit whose levels and sweeps take the plan beyond it
+    data = _paper_dict()
+    data["frequencies"] = {
+        "ranges": [{"start_hz": 20.0, "stop_hz": 40.0, "step_hz": 0.001}],
+        "direction": "up-down",
+    }
+    data["excitation"]["levels_n"] = [1.0, 2.0, 3.0]
+    with pytest.raises(
+        ConfigError, match=f"120,006 steps, more than the maximum of {MAX_PLAN_STEPS:,}"
+    ):
+        plan_from_dict(data, "plan big.toml")
+    # the same from a plan file, as 'rig run FILE' reads it
+    path = tmp_path / "big.toml"
+    path.write_text(text.replace("step_hz = 1.0", "step_hz = 1e-9", 1))
+    assert "step_hz = 1e-9" in path.read_text()
+    with pytest.raises(ConfigError, match=r"big\.toml.*frequencies\.ranges\[0\].*step_hz"):
+        load_plan(path)
+
+
 # ------------------------------------------------------------------------ recorded procedures
 
 

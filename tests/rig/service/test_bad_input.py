@@ -55,7 +55,7 @@ def test_an_out_name_with_a_newline_or_other_control_character_is_refused(shared
 
 @pytest.mark.timeout(60)
 def test_a_plan_beyond_the_step_limit_is_refused_before_it_is_expanded(shared_service):
-    from rig.service.server import MAX_PLAN_STEPS
+    from rig.plans import MAX_PLAN_STEPS
 
     svc = shared_service
     before = svc.client().runs()
@@ -66,7 +66,8 @@ def test_a_plan_beyond_the_step_limit_is_refused_before_it_is_expanded(shared_se
     assert status == 400, data
     error = json.loads(data)["error"]
     assert error["code"] == "plan-too-large"
-    assert f"{MAX_PLAN_STEPS:,}" in error["message"] and "38,000,000,002" in error["message"]
+    assert f"{MAX_PLAN_STEPS:,}" in error["message"] and "19,000,000,001" in error["message"]
+    assert "step_hz" in error["message"]
     assert svc.client().runs() == before
     assert svc.proc.poll() is None
 

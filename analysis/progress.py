@@ -1,0 +1,199 @@
+"""Progress of long work: what is being done, how far it is and the time left.
+
+A long stage (the Latin hypercube starts of a calibration, its cross-validation folds, the steps
+of a stepped-sine run) reports :class:`Progress` to a :class:`ProgressReporter`, which shows it
+one of two ways:
+
+- ``"text"``, for a person: ``calibration: Latin hypercube starts 37/100 [#######.....] 41 s,
+  about 1 min 10 s left``, rewritten in place on a terminal, otherwise a line at most every
+  ``interval_s`` seconds and at the end;
+- ``"json"``, for a program reading the stream (``--json`` on the command line): one line per
+  update, ``progress: {"stage": ..., "done": ..., "total": ..., "elapsed_s": ..., "note":
+  ...}``, at most one a second per stage, and at the end. ``rig workflow`` reads these from the
+  commands it runs (:func:`parse_line`) and shows them as text.
+
+The time left is the elapsed time scaled by the work left (``elapsed * (total - done) /
+done``): the stages report units of about equal cost.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass
+from typing import TextIO
+
+__all__ = ["PREFIX", "Progress", "ProgressReporter", "format_duration", "parse_line"]
+
+#: What starts a progress line in ``"json"`` mode.
+PREFIX = "progress: "
+_JSON_INTERVAL_S = 1.0
+
+
+@dataclass(frozen=True)
+class Progress:
+    """How far one stage is.
+
+    Parameters
+    ----------
+    stage : str
+        What is being done, e.g. ``"Latin hypercube starts"``.
+    done : int
+        Units finished.
+    total : int or None
+        Units in all; None when not known beforehand (an optimiser's iterations).
+    elapsed_s : float
+        Seconds since the stage started.
+    note : str
+        A detail of the last unit (``"metric 1.83"``).
+    """
+
+    stage: str
+    done: int
+    total: int | None
+    elapsed_s: float
+    note: str = ""
+
+    @property
+    def left_s(self) -> float | None:
+        """Seconds left, from the pace so far; None before the first unit or without a total."""
+        if not self.total or self.done <= 0:
+            return None
+        return self.elapsed_s * max(self.total - self.done, 0) / self.done
+
+    @property
+    def finished(self) -> bool:
+        return self.total is not None and self.done >= self.total
+
+    def text(self) -> str:
+        """One line for a person."""
+        count = (
+            f"{self.done}/{self.total} {_bar(self.done, self.total)}"
+            if self.total
+            else (f"{self.done}")
+        )
+        left = self.left_s
+        when = f"{format_duration(self.elapsed_s)}"
+        if self.finished:
+            when = f"done in {when}"
+        elif left is not None:
+            when += f", about {format_duration(left)} left"
+        note = f" ({self.note})" if self.note else ""
+        return f"{self.stage} {count} {when}{note}"
+
+
+def format_duration(seconds: float) -> str:
+    """``"45 s"``, ``"3 min 05 s"``, ``"1 h 02 min"``."""
+    if not math.isfinite(seconds):
+        return "?"
+    s = round(max(seconds, 0.0))
+    if s < 60:
+        return f"{s} s"
+    if s < 3600:
+        return f"{s // 60} min {s % 60:02d} s"
+    return f"{s // 3600} h {(s % 3600) // 60:02d} min"
+
+
+def _bar(done: int, total: int | None, width: int = 20) -> str:
+    if not total:
+        return ""
+    k = min(width, round(width * done / total))
+    return "[" + "#" * k + "." * (width - k) + "]"
+
+
+def parse_line(line: str) -> Progress | None:
+    """The :class:`Progress` of a ``"json"`` line; None for any other line."""
+    if not line.startswith(PREFIX):
+        return None
+    try:
+        d = json.loads(line[len(PREFIX) :])
+        return Progress(
+            str(d["stage"]),
+            int(d["done"]),
+            None if d.get("total") is None else int(d["total"]),
+            float(d["elapsed_s"]),
+            str(d.get("note", "")),
+        )
+    except (ValueError, KeyError, TypeError):
+        return None
+
+
+class ProgressReporter:
+    """Shows :class:`Progress` as text or JSON lines (module docstring).
+
+    Parameters
+    ----------
+    mode : {"text", "json", "none"}
+    stream : text stream, optional
+        Default ``sys.stderr``.
+    prefix : str
+        Put before each text line (``"calibration: "``).
+    interval_s : float
+        Least time between two text lines when the stream is not a terminal.
+    """
+
+    def __init__(
+        self,
+        mode: str = "text",
+        stream: TextIO | None = None,
+        prefix: str = "",
+        interval_s: float = 15.0,
+    ) -> None:
+        if mode not in ("text", "json", "none"):
+            raise ValueError(f"progress mode: expected text, json or none, got {mode!r}")
+        self.mode = mode
+        self.stream = stream or sys.stderr
+        self.prefix = prefix
+        self.interval_s = interval_s
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self._starts: dict[str, float] = {}
+        self._shown: dict[str, float] = {}
+        self._open_line = False
+
+    def begin(self, stage: str, total: int | None = None, note: str = "") -> None:
+        """Start the clock of ``stage`` (and show it at 0)."""
+        self._starts[stage] = time.perf_counter()
+        self._shown.pop(stage, None)
+        self.show(Progress(stage, 0, total, 0.0, note))
+
+    def update(self, stage: str, done: int, total: int | None = None, note: str = "") -> None:
+        """``done`` units of ``stage`` finished (the clock starts at the first call)."""
+        t0 = self._starts.setdefault(stage, time.perf_counter())
+        self.show(Progress(stage, done, total, time.perf_counter() - t0, note))
+
+    def show(self, p: Progress) -> None:
+        """Show ``p`` if it is due (always at its start and end)."""
+        if self.mode == "none":
+            return
+        now = time.perf_counter()
+        last = self._shown.get(p.stage)
+        interval = _JSON_INTERVAL_S if self.mode == "json" else self.interval_s
+        if self.tty and self.mode == "text":
+            interval = 0.2
+        if last is not None and not p.finished and now - last < interval:
+            return
+        self._shown[p.stage] = now
+        if self.mode == "json":
+            self._write(PREFIX + json.dumps(asdict(p)))
+        elif self.tty and not p.finished:
+            self.stream.write("\r" + (self.prefix + p.text())[:119].ljust(119))
+            self.stream.flush()
+            self._open_line = True
+        else:
+            self._write(self.prefix + p.text())
+
+    def _write(self, text: str) -> None:
+        if self._open_line:
+            self.stream.write("\r" + " " * 119 + "\r")
+            self._open_line = False
+        self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        """End a line left open on a terminal."""
+        if self._open_line:
+            self.stream.write("\n")
+            self.stream.flush()
+            self._open_line = False

@@ -1,0 +1,118 @@
+"""Progress reports (analysis.progress): the time left, the text and JSON forms, the throttle,
+and the counts the long stages report."""
+
+import io
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+from analysis.executors import run_jobs
+from analysis.progress import PREFIX, Progress, ProgressReporter, format_duration, parse_line
+
+
+def test_time_left_is_the_pace_so_far_times_the_work_left():
+    p = Progress("starts", 25, 100, 50.0)
+    assert p.left_s == pytest.approx(150.0)
+    assert Progress("starts", 0, 100, 3.0).left_s is None
+    assert Progress("LM iterations", 7, None, 3.0).left_s is None
+    assert Progress("starts", 100, 100, 200.0).finished
+    assert "about 2 min 30 s left" in p.text() and "25/100" in p.text()
+    assert "done in 3 min 20 s" in Progress("starts", 100, 100, 200.0).text()
+
+
+@pytest.mark.parametrize(
+    "seconds, text", [(4.4, "4 s"), (65, "1 min 05 s"), (3725, "1 h 02 min"), (float("nan"), "?")]
+)
+def test_durations_read_as_a_person_says_them(seconds, text):
+    assert format_duration(seconds) == text
+
+
+def test_json_lines_round_trip_and_other_lines_are_not_progress():
+    stream = io.StringIO()
+    reporter = ProgressReporter("json", stream)
+    reporter.update("folds", 3, 9, "metric 1.2")
+    line = stream.getvalue().strip()
+    assert line.startswith(PREFIX)
+    p = parse_line(line)
+    assert (p.stage, p.done, p.total, p.note) == ("folds", 3, 9, "metric 1.2")
+    assert parse_line("WARNING analysis: something") is None
+    assert parse_line(PREFIX + "{not json") is None
+    assert parse_line(PREFIX + '{"stage": "x"}') is None
+
+
+def test_text_lines_are_throttled_but_the_end_is_always_shown():
+    stream = io.StringIO()
+    reporter = ProgressReporter("text", stream, prefix="calibration: ", interval_s=60.0)
+    for k in range(1, 101):
+        reporter.update("starts", k, 100)
+    lines = stream.getvalue().splitlines()
+    assert len(lines) == 2, lines  # the first update, then nothing until the last
+    assert lines[0].startswith("calibration: starts 1/100")
+    assert "100/100" in lines[-1] and "done in" in lines[-1]
+    with pytest.raises(ValueError, match="progress mode"):
+        ProgressReporter("bar")
+
+
+@pytest.mark.parametrize("executor", [None, "threads"])
+def test_run_jobs_counts_every_finished_job(executor):
+    seen = []
+    with ThreadPoolExecutor(2) if executor else _null() as ex:
+        out = run_jobs(abs, [-1, -2, -3, -4, -5], ex, seen.append)
+    assert out == [1, 2, 3, 4, 5]
+    assert seen == [1, 2, 3, 4, 5]
+
+
+class _null:
+    def __enter__(self):
+        return None
+
+    def __exit__(self, *exc):
+        return False
+
+
+def test_the_workflow_shows_a_stage_s_progress_and_keeps_its_result(capsys):
+    from rig.workflow import _stage
+
+    script = (
+        "import sys, json\n"
+        "from analysis.progress import ProgressReporter\n"
+        "r = ProgressReporter('json')\n"
+        "print('WARNING something', file=sys.stderr)\n"
+        "[r.update('starts', k, 4) for k in range(1, 5)]\n"
+        "print(json.dumps({'answer': 42}))\n"
+    )
+    log = []
+    out = _stage("test stage", ["-c", script], log, quiet=False)
+    assert out == {"answer": 42}
+    err = capsys.readouterr().err
+    assert "== test stage" in err and "starts 1/4" in err and "starts 4/4" in err
+    assert "done in" in err and "WARNING" not in err and PREFIX not in err
+
+
+def test_a_failing_stage_quotes_its_error_output_not_its_progress():
+    from rig.workflow import StageError, _stage
+
+    script = (
+        "import sys\nfrom analysis.progress import ProgressReporter\n"
+        "ProgressReporter('json').update('starts', 1, 4)\n"
+        "sys.exit('bad input: the file holds no steps')\n"
+    )
+    with pytest.raises(StageError, match="the file holds no steps") as err:
+        _stage("broken", ["-c", script], [], quiet=True)
+    assert PREFIX not in str(err.value)
+
+
+def test_lhs_costs_report_every_start():
+    from analysis.calibration.nonlinear import evaluate_costs
+
+    class Cost:
+        def cost(self, t):
+            return float(np.sum(t**2))
+
+    seen = []
+    costs = evaluate_costs(
+        None, np.ones((6, 2)), None, Cost(), on_done=lambda k, n: seen.append((k, n))
+    )
+    assert costs.tolist() == [2.0] * 6
+    assert seen == [(k, 6) for k in range(1, 7)]
