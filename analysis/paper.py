@@ -40,6 +40,6 @@ TABLE4_BEST = "actuator 3, levels [2, 4, 6] N, range [21-40] Hz, sensors [4, 6, 
 
 def paper_frequencies_hz() -> np.ndarray:
     """The stepped sine's fundamentals [Hz]: 21-40 Hz in 1 Hz plus 24-28 Hz in 0.1 Hz, overlaps
-    removed, ascending (65 frequencies)."""
+    removed, ascending (56 frequencies)."""
     f = np.concatenate([np.arange(21, 41, 1.0), np.arange(240, 281) / 10.0])
     return np.unique(np.round(f, 6))

@@ -12,8 +12,8 @@ one of two ways:
   ...}``, at most one a second per stage, and at the end. ``rig workflow`` reads these from the
   commands it runs (:func:`parse_line`) and shows them as text.
 
-The time left is the elapsed time scaled by the work left (``elapsed * (total - done) /
-done``): the stages report units of about equal cost.
+The time left is the pace so far times the work left (:func:`time_left`): the stages report
+units of about equal cost.
 """
 
 from __future__ import annotations
@@ -25,7 +25,14 @@ import time
 from dataclasses import asdict, dataclass
 from typing import TextIO
 
-__all__ = ["PREFIX", "Progress", "ProgressReporter", "format_duration", "parse_line"]
+__all__ = [
+    "PREFIX",
+    "Progress",
+    "ProgressReporter",
+    "format_duration",
+    "parse_line",
+    "time_left",
+]
 
 #: What starts a progress line in ``"json"`` mode.
 PREFIX = "progress: "
@@ -48,6 +55,8 @@ class Progress:
         Seconds since the stage started.
     note : str
         A detail of the last unit (``"metric 1.83"``).
+    left_s : float or None
+        Seconds left at the pace so far (:func:`time_left`); None when not known.
     """
 
     stage: str
@@ -55,13 +64,7 @@ class Progress:
     total: int | None
     elapsed_s: float
     note: str = ""
-
-    @property
-    def left_s(self) -> float | None:
-        """Seconds left, from the pace so far; None before the first unit or without a total."""
-        if not self.total or self.done <= 0:
-            return None
-        return self.elapsed_s * max(self.total - self.done, 0) / self.done
+    left_s: float | None = None
 
     @property
     def finished(self) -> bool:
@@ -82,6 +85,14 @@ class Progress:
             when += f", about {format_duration(left)} left"
         note = f" ({self.note})" if self.note else ""
         return f"{self.stage} {count} {when}{note}"
+
+
+def time_left(seconds: float, counted: int, remaining: int) -> float | None:
+    """Seconds left when ``counted`` units took ``seconds`` and ``remaining`` are to come; None
+    before a unit has been timed."""
+    if counted <= 0 or seconds <= 0:
+        return None
+    return seconds * max(remaining, 0) / counted
 
 
 def format_duration(seconds: float) -> str:
@@ -109,12 +120,14 @@ def parse_line(line: str) -> Progress | None:
         return None
     try:
         d = json.loads(line[len(PREFIX) :])
+        left = d.get("left_s")
         return Progress(
             str(d["stage"]),
             int(d["done"]),
             None if d.get("total") is None else int(d["total"]),
             float(d["elapsed_s"]),
             str(d.get("note", "")),
+            None if left is None else float(left),
         )
     except (ValueError, KeyError, TypeError):
         return None
@@ -148,20 +161,25 @@ class ProgressReporter:
         self.prefix = prefix
         self.interval_s = interval_s
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
-        self._starts: dict[str, float] = {}
+        self._starts: dict[str, tuple[float, int]] = {}
         self._shown: dict[str, float] = {}
         self._open_line = False
 
     def begin(self, stage: str, total: int | None = None, note: str = "") -> None:
         """Start the clock of ``stage`` (and show it at 0)."""
-        self._starts[stage] = time.perf_counter()
+        self._starts[stage] = (time.perf_counter(), 0)
         self._shown.pop(stage, None)
         self.show(Progress(stage, 0, total, 0.0, note))
 
     def update(self, stage: str, done: int, total: int | None = None, note: str = "") -> None:
-        """``done`` units of ``stage`` finished (the clock starts at the first call)."""
-        t0 = self._starts.setdefault(stage, time.perf_counter())
-        self.show(Progress(stage, done, total, time.perf_counter() - t0, note))
+        """``done`` units of ``stage`` finished. Without :meth:`begin`, the clock starts at the
+        first call, and the pace is taken over the units finished since."""
+        now = time.perf_counter()
+        t0, done0 = self._starts.setdefault(stage, (now, done))
+        left = None
+        if total is not None and done < total:
+            left = time_left(now - t0, done - done0, total - done)
+        self.show(Progress(stage, done, total, now - t0, note, left))
 
     def show(self, p: Progress) -> None:
         """Show ``p`` if it is due (always at its start and end)."""

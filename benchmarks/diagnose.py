@@ -65,9 +65,9 @@ from analysis.measurement_file import (
 from analysis.mhb.solver import NewtonSettings
 from analysis.mhb.sweep import solve_steps
 from analysis.model import load_model
+from analysis.paper import paper_frequencies_hz
 from analysis.system import attachments, build_problem_dofs
 from benchmarks.mhb import paper_sweep_s
-from sim_backend.sizing import paper_frequencies
 from sim_backend.truth import TRUTH_DIR, load_truth
 
 log = logging.getLogger(__name__)
@@ -316,7 +316,7 @@ def simulate_stepped_sine(
     ``asd sqrt(2 / T)``); steps where the truth's balance does not converge are not recorded.
     Returns ``path``."""
     truth = load_truth(truth_name)
-    f = paper_frequencies() if frequencies_hz is None else np.asarray(frequencies_hz, float)
+    f = paper_frequencies_hz() if frequencies_hz is None else np.asarray(frequencies_hz, float)
     s = truth.sensors
     masses = {p: (s.impedance_head_mass_kg if p == 3 else s.accelerometer_mass_kg) for p in points}
     model = truth.model.add_masses(masses)

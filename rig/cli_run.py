@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
-from analysis.progress import Progress, ProgressReporter, format_duration
+from analysis.progress import ProgressReporter, format_duration, time_left
 from rig.events import (
     Event,
     FaultRaised,
@@ -61,9 +61,7 @@ class ProgressPrinter:
         """``", about 2 min 10 s left"`` at the pace since the first ``key`` event."""
         now = time.perf_counter()
         t0, d0 = self._first.setdefault(key, (now, done))
-        if done <= d0 or done >= total:
-            return ""
-        left = Progress(key, done - d0, total - d0, now - t0).left_s
+        left = time_left(now - t0, done - d0, total - done) if done < total else None
         return "" if left is None else f", about {format_duration(left)} left"
 
     def _line(self, text: str, transient: bool = False) -> None:
@@ -198,7 +196,7 @@ def _schedule_faults(backend, bus, faults) -> None:
 
 def _run(args, kind: str) -> int:
     from rig.plans import load_plan
-    from rig.runner import TestRun, open_rig
+    from rig.runner import RunSession, open_rig
     from rig.safety import interrupt_handlers
     from rig.setup import load_setup
 
@@ -233,6 +231,7 @@ def _run(args, kind: str) -> int:
         logging.getLogger("rig").setLevel(logging.ERROR)  # the progress printer shows warnings
     info = {"backend": args.backend, "backend_options": _jsonable(options), "argv": sys.argv[1:]}
     printer = ProgressPrinter(quiet=args.quiet, json_progress=args.json)
+    session = RunSession()
     with open_rig(
         args.backend,
         setup,
@@ -241,15 +240,15 @@ def _run(args, kind: str) -> int:
         amplifier_port=args.amplifier_port,
     ) as rig:
         common = {"amplifier": rig.amplifier, "run_info": info}
-        if resume:
-            run = TestRun.resume(rig.backend, out, plan=plan, setup=setup, **common)
-        else:
-            run = TestRun(rig.backend, plan, setup, out, overwrite=args.overwrite, **common)
-        run.engine.bus.subscribe(printer)
+        if not resume:
+            common["overwrite"] = args.overwrite
+        run = session.prepare(
+            rig.backend, plan, setup, out, resume=bool(resume), subscribers=[printer], **common
+        )
         if faults:
             _schedule_faults(rig.backend, run.engine.bus, faults)
-        with interrupt_handlers(run.engine.abort):
-            summary = run.execute()
+        with interrupt_handlers(session.abort):
+            summary = session.execute(run)
     printer.close()
     if args.json:
         print(json.dumps(_summary_json(summary)))

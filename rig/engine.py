@@ -201,6 +201,7 @@ class RunEngine:
         self._cursor = 0
         self._samples_read = 0
         self._steps_written = 0
+        self._driven = False  # a non-zero output was written (so there was a ramp down)
         self._output: _Output | None = None
         self._checks: SignalChecks | None = None
         self._sink: Any = None
@@ -256,6 +257,7 @@ class RunEngine:
         self._sink = sink
         self._state = "running"
         self._steps_written = 0
+        self._driven = False
         self._samples_read = 0
         self._mute_error = ""
         t0 = time.monotonic()
@@ -300,7 +302,8 @@ class RunEngine:
             message = f"{message}. {ending}" if message else ending
             message = f"{message}; {self._steps_written} step(s) written"
         elif status != "success":
-            message = f"{message}. Output ramped to 0 V; {self._steps_written} step(s) written"
+            output = "Output ramped to 0 V" if self._driven else "Output at 0 V (never driven)"
+            message = f"{message}. {output}; {self._steps_written} step(s) written"
         if self._mute_error:
             ending = f"muting the amplifier FAILED ({self._mute_error})"
             message = f"{message}; {ending}" if message else ending
@@ -409,6 +412,7 @@ class RunEngine:
         return WaveformApplied(wave.size, steady, peak)
 
     def _write(self, wave: np.ndarray, ramp_s: float) -> int:
+        self._driven = self._driven or bool(np.any(wave))
         return int(self.backend.write_periodic(wave, ramp_s))
 
     def _begin_step(self, cmd: BeginStep) -> None:

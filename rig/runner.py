@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Iterator, Mapping
+import threading
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from os import PathLike
@@ -45,7 +46,15 @@ from rig.run_stepped import stepped_sine_procedure
 from rig.safety import deferred_interrupts
 from rig.setup import LabSetup, setup_from_dict
 
-__all__ = ["Rig", "RunSummary", "TestRun", "lock_name", "open_rig", "summarize"]
+__all__ = [
+    "Rig",
+    "RunSession",
+    "RunSummary",
+    "TestRun",
+    "lock_name",
+    "open_rig",
+    "summarize",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -502,3 +511,99 @@ class TestRun:
             with deferred_interrupts():
                 note_output_not_at_zero(self.path, outcome.message)
         return outcome
+
+
+# ------------------------------------------------------------------------ one run, as started
+
+
+class RunSession:
+    """One run as every front end starts it: the command line, the GUI and the service.
+
+    A session is made before its engine exists (the rig may still be opening, the file being
+    read for a resume), so a pause or an abort asked for meanwhile is held and given to the
+    engine the moment it exists; afterwards they go to it directly. :meth:`pause`,
+    :meth:`resume` and :meth:`abort` may be called from any thread.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._engine: RunEngine | None = None
+        self._pending_pause = False
+        self._pending_abort = ""
+
+    @property
+    def engine(self) -> RunEngine | None:
+        """The engine of the run under way; None before it starts and after it ends."""
+        with self._lock:
+            return self._engine
+
+    def pause(self) -> None:
+        """Pause at the next safe point (held until the engine exists)."""
+        with self._lock:
+            if self._engine is None:
+                self._pending_pause = True
+            else:
+                self._engine.pause()
+
+    def resume(self) -> None:
+        """Continue a paused run (or take back a pause not yet given)."""
+        with self._lock:
+            self._pending_pause = False
+            if self._engine is not None:
+                self._engine.resume()
+
+    def abort(self, reason: str = "aborted by the operator") -> None:
+        """End the run: output ramped to 0 V, steps kept (held until the engine exists)."""
+        with self._lock:
+            if self._engine is None:
+                self._pending_abort = self._pending_abort or reason
+            else:
+                self._engine.abort(reason)
+
+    def prepare(
+        self,
+        backend,
+        plan: Plan | None,
+        setup: LabSetup | None,
+        path: str | PathLike[str],
+        *,
+        resume: bool = False,
+        subscribers: Sequence[Callable] = (),
+        **options: Any,
+    ) -> TestRun:
+        """The :class:`TestRun` of this session: ``resume`` continues the file at ``path`` (its
+        stored plan and setup unless given), otherwise a new file; ``options`` as
+        :class:`TestRun`'s. The subscribers get every event of its engine, and what was asked
+        of the session so far is given to the engine."""
+        if resume:
+            run = TestRun.resume(backend, path, plan=plan, setup=setup, **options)
+        else:
+            if plan is None or setup is None:
+                raise ValueError("a new run needs a plan and a setup")
+            run = TestRun(backend, plan, setup, path, **options)
+        self.attach(run.engine, subscribers)
+        return run
+
+    def attach(self, engine: RunEngine, subscribers: Sequence[Callable] = ()) -> None:
+        """Make ``engine`` the session's (for a procedure run without a :class:`TestRun`)."""
+        for subscriber in subscribers:
+            engine.bus.subscribe(subscriber)
+        with self._lock:
+            self._engine = engine
+            if self._pending_pause:
+                engine.pause()
+            if self._pending_abort:
+                engine.abort(self._pending_abort)
+
+    def detach(self) -> None:
+        """The run is over: later requests are held for the next one."""
+        with self._lock:
+            self._engine = None
+            self._pending_pause, self._pending_abort = False, ""
+
+    def execute(self, run: TestRun) -> RunSummary:
+        """Run ``run`` (from :meth:`prepare`) to its end; the session is free again after."""
+        try:
+            return run.execute()
+        finally:
+            self.detach()

@@ -18,19 +18,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from analysis.mhb.sweep import solve_steps
+from analysis.paper import paper_frequencies_hz
 from analysis.system import build_problem
 from sim_backend.truth import Truth, load_truth
 
-__all__ = ["Misfit", "PaperTest", "paper_frequencies", "response_sweep", "truth_misfit"]
+__all__ = ["Misfit", "PaperTest", "response_sweep", "truth_misfit"]
 
 logger = logging.getLogger(__name__)
-
-
-def paper_frequencies() -> np.ndarray:
-    """Fundamental frequencies of the paper's test [Hz], ascending, shape (n,)."""
-    coarse = np.arange(21.0, 40.5, 1.0)
-    fine = np.round(np.arange(24.0, 28.05, 0.1), 6)
-    return np.unique(np.concatenate([coarse, fine]))
 
 
 @dataclass(frozen=True)
@@ -105,7 +99,7 @@ def response_sweep(
     truth : Truth
     test : PaperTest, optional
     frequencies_hz : ndarray, shape (n_f,), optional
-        Default :func:`paper_frequencies`; each level is swept upwards.
+        Default :func:`analysis.paper.paper_frequencies_hz`; each level is swept upwards.
 
     Returns
     -------
@@ -113,7 +107,7 @@ def response_sweep(
         Orders 1, 2, 3.
     """
     test = test or PaperTest()
-    f = paper_frequencies() if frequencies_hz is None else np.asarray(frequencies_hz, float)
+    f = paper_frequencies_hz() if frequencies_hz is None else np.asarray(frequencies_hz, float)
     model = truth.model.add_masses(_masses(truth, test))
     problem = build_problem(
         model,
@@ -153,7 +147,7 @@ def truth_misfit(
     test = test or PaperTest()
     truth = truth if isinstance(truth, Truth) else load_truth(truth)
     reference = reference if isinstance(reference, Truth) else load_truth(reference)
-    f = paper_frequencies()
+    f = paper_frequencies_hz()
     a = response_sweep(truth, test, f)
     b = response_sweep(reference, test, f)
     root = np.sqrt(2.0 * f / test.averaged_periods)  # sqrt(2 / T), shape (n_f,)

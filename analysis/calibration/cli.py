@@ -46,18 +46,19 @@ def _progress(reporter: ProgressReporter):
     """``calibrate_nonlinear``'s progress callback, shown by ``reporter``."""
 
     def show(stage: str, info: dict) -> None:
-        if stage == "lhs_progress":
+        if stage == "lhs_progress" and info["done"] < info["total"]:
             reporter.update("Latin hypercube starts", info["done"], info["total"])
-        elif stage == "lhs":
+        elif stage == "lhs":  # the last start, with the best metric
             reporter.update(
                 "Latin hypercube starts",
                 info["n"],
                 info["n"],
                 f"best metric {info['best_cost']:.4g}",
             )
-        elif stage in ("lm", "joint"):
-            what = "LM iterations" if stage == "lm" else "joint refinement iterations"
-            reporter.update(what, info["iteration"], None, f"metric {info['cost']:.6g}")
+        elif stage in ("lm", "joint", "lm_done", "joint_done"):
+            what = "LM iterations" if stage.startswith("lm") else "joint refinement iterations"
+            total = info["iteration"] if stage.endswith("_done") else None
+            reporter.update(what, info["iteration"], total, f"metric {info['cost']:.6g}")
 
     return show
 

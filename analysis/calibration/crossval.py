@@ -240,6 +240,8 @@ def cross_validate(
     x0 = calibration.lm.x
     job = functools.partial(_fold, theta0=x0, bounds=bounds, max_iterations=max_iterations)
     tick = (lambda k: on_done(k, len(specs))) if on_done else None
+    if tick:
+        tick(0)  # the clock starts here: folds run side by side
     out = run_jobs(job, specs, executor, tick)
     stuck = [name for name, (_, accepted) in zip(folds, out, strict=True) if accepted == 0]
     if stuck:

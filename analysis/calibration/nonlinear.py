@@ -452,6 +452,8 @@ def evaluate_costs(
     """Metric at many scaled points, on ``executor`` if given (chunks per worker);
     ``on_done(done, total)`` as points are finished (progress)."""
     total = len(thetas)
+    if on_done:
+        on_done(0, total)  # the clock starts here: chunks run side by side
     if executor is None:
         obj = local or spec.build()
         costs = []
@@ -545,6 +547,8 @@ def calibrate_nonlinear(
         if best is None or res.cost < best.cost:
             best = res
     lm_s = time.perf_counter() - t0
+    if progress:
+        progress("lm_done", {"iteration": best.nit, "cost": float(best.cost)})
     m, n = best.fun.size, space.size
     dof = max(m - n, 1)
     chi2 = 2 * best.cost / dof
@@ -634,6 +638,8 @@ def _joint_refinement(result, model, data, objective, progress) -> None:
         prior, x0, bounds=(lo, hi), max_iterations=st.max_iterations,
         callback=(lambda h: progress("joint", h)) if progress else None,
     )  # fmt: skip
+    if progress:
+        progress("joint_done", {"iteration": res.nit, "cost": float(res.cost)})
     nb = len(held.names)
     J = res.jac[:-nb]
     D = sp.dp_dtheta(res.x)

@@ -30,6 +30,7 @@ from rig.events import Event
 from rig.gui.sample_tap import SampleTap, TappedBackend, TimeTraces
 from rig.plans import Plan
 from rig.pretest import pretest_procedure
+from rig.runner import RunSession
 from rig.setup import LabSetup
 
 __all__ = [
@@ -209,10 +210,8 @@ class LocalRunController(RunController):
         self.amplifier_poll_s = float(amplifier_poll_s)
         self.tap = SampleTap()
         self._worker: _Worker | None = None
-        self._engine: RunEngine | None = None
+        self._session = RunSession()
         self._amp = None
-        self._lock = threading.Lock()
-        self._abort_requested = False
         self._stop_poll = threading.Event()
 
     # -- control (GUI thread) -------------------------------------------------------------
@@ -223,26 +222,19 @@ class LocalRunController(RunController):
     def start(self, request: RunRequest) -> None:
         if self.busy:
             raise RuntimeError("a run is under way; abort it or wait for it to end")
-        self._abort_requested = False
+        self._session = RunSession()
         self.tap = SampleTap()
         self._worker = _Worker(self, request)
         self._worker.start()
 
     def pause(self) -> None:
-        with self._lock:
-            if self._engine is not None:
-                self._engine.pause()
+        self._session.pause()
 
     def resume(self) -> None:
-        with self._lock:
-            if self._engine is not None:
-                self._engine.resume()
+        self._session.resume()
 
     def abort(self) -> None:
-        with self._lock:
-            self._abort_requested = True
-            if self._engine is not None:
-                self._engine.abort()
+        self._session.abort()
 
     def time_traces(self) -> TimeTraces | None:
         return self.tap.snapshot()
@@ -270,7 +262,7 @@ class LocalRunController(RunController):
 
     # -- the run (worker thread) -----------------------------------------------------------
     def _run(self, request: RunRequest) -> RunEnd:
-        from rig.runner import TestRun, open_rig
+        from rig.runner import open_rig
 
         options = {**dict(request.backend_options), **self.extra_backend_options}
         if request.backend == "sim":
@@ -295,6 +287,7 @@ class LocalRunController(RunController):
                     self.amplifier.emit(
                         "not remote controlled: the setup names no serial port for the amplifier"
                     )
+                session = self._session
                 if request.pretest_only:
                     engine = RunEngine(
                         backend,
@@ -304,40 +297,28 @@ class LocalRunController(RunController):
                         sample_rate_hz=request.plan.sample_rate_hz or None,
                         amplifier=rig.amplifier,
                     )
+                    session.attach(engine, [self._publish])
                     run = None
-                elif request.resume:
-                    run = TestRun.resume(
-                        backend,
-                        request.path,
-                        setup=request.setup,
-                        amplifier=rig.amplifier,
-                        pause_on_fault=request.pause_on_fault,
-                        run_info=info,
-                    )
-                    engine = run.engine
                 else:
-                    run = TestRun(
+                    options = {"overwrite": request.overwrite} if not request.resume else {}
+                    run = session.prepare(
                         backend,
-                        request.plan,
+                        None if request.resume else request.plan,
                         request.setup,
                         request.path,
+                        resume=request.resume,
+                        subscribers=[self._publish],
                         amplifier=rig.amplifier,
                         pause_on_fault=request.pause_on_fault,
-                        overwrite=request.overwrite,
                         run_info=info,
+                        **options,
                     )
-                    engine = run.engine
-                engine.bus.subscribe(self._publish)
-                with self._lock:
-                    self._engine = engine
-                    if self._abort_requested:
-                        engine.abort()
                 poller = self._start_polling(rig.amplifier)
                 try:
                     if run is None:
                         outcome = engine.run(pretest_procedure(request.plan))
                         return RunEnd(outcome.status, outcome.message)
-                    summary = run.execute()
+                    summary = session.execute(run)
                 finally:
                     self._stop_polling(poller, rig.amplifier)
                 return RunEnd(summary.status, summary.message, summary.path, tuple(summary.lines()))
@@ -345,8 +326,7 @@ class LocalRunController(RunController):
             logger.warning("the run could not start or failed: %s", exc)
             return RunEnd("failed", f"{type(exc).__name__}: {exc}", started=False)
         finally:
-            with self._lock:
-                self._engine = None
+            self._session.detach()
             self._amp = None
 
     def _publish(self, event: Event) -> None:

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from rig.events import Event
+from rig.runner import RunSession
 from rig.service.state import RunRecord, RunState, ServiceState
 
 __all__ = ["RigOptions", "RigOwner"]
@@ -89,11 +90,9 @@ class RigOwner(threading.Thread):
         self.ready = threading.Event()
         self.error: BaseException | None = None
         self._stopping = threading.Event()
-        self._lock = threading.Lock()
-        self._engine = None
+        self._lock = threading.Lock()  # guards _current and _session
         self._current: RunRecord | None = None
-        self._pending_pause = False
-        self._pending_abort = ""
+        self._session = RunSession()
 
     # ------------------------------------------------------------------ control (any thread)
     @property
@@ -115,10 +114,7 @@ class RigOwner(threading.Thread):
         with self._lock:
             if self._current is None or self._current.id != run_id:
                 return False
-            if self._engine is None:
-                self._pending_pause = True
-            else:
-                self._engine.pause()
+            self._session.pause()
             return True
 
     def resume(self, run_id: str) -> bool:
@@ -126,9 +122,7 @@ class RigOwner(threading.Thread):
         with self._lock:
             if self._current is None or self._current.id != run_id:
                 return False
-            self._pending_pause = False
-            if self._engine is not None:
-                self._engine.resume()
+            self._session.resume()
             return True
 
     def abort(self, reason: str, run_id: str | None = None) -> bool:
@@ -136,10 +130,7 @@ class RigOwner(threading.Thread):
         with self._lock:
             if self._current is None or (run_id is not None and self._current.id != run_id):
                 return False
-            if self._engine is None:
-                self._pending_abort = self._pending_abort or reason
-            else:
-                self._engine.abort(reason)
+            self._session.abort(reason)
             return True
 
     # ------------------------------------------------------------------ the thread
@@ -180,13 +171,12 @@ class RigOwner(threading.Thread):
 
     def _execute(self, rig, record: RunRecord) -> None:
         from rig.plans import plan_from_dict
-        from rig.runner import TestRun
 
         with self._lock:
             self._current = record
-            self._pending_pause, self._pending_abort = False, ""
+            session = self._session = RunSession()
             if self._stopping.is_set():  # stopped between taking the run and getting here
-                self._pending_abort = STOP_REASON
+                session.abort(STOP_REASON)
         self.publish(record.id, RunState("running", "", record.n_done, record.n_steps))
         logger.info("run %s (%s) started, attempt %d", record.id, record.plan_name, record.attempts)
         state, message, n_done, summary = "failed", "", record.n_done, None
@@ -198,26 +188,28 @@ class RigOwner(threading.Thread):
                 "run_info": {**self.run_info, "service_run": record.id},
                 "pause_on_fault": record.pause_on_fault,
             }
-            setup = self.options.setup
-            if record.resume and path.exists() and plan.kind == "stepped-sine":
-                run = TestRun.resume(rig.backend, path, plan=plan, setup=setup, **common)
-            else:
-                run = TestRun(rig.backend, plan, setup, path, overwrite=record.resume, **common)
-            run.engine.bus.subscribe(lambda event: self.publish(record.id, event))
-            with self._lock:
-                self._engine = run.engine
-                if self._pending_pause:
-                    run.engine.pause()
-                if self._pending_abort:
-                    run.engine.abort(self._pending_abort)
-            summary = run.execute()
+            # a run taken up again after the service stopped continues its file; one that had
+            # not written it yet (or a random test) starts it again
+            resume = record.resume and path.exists() and plan.kind == "stepped-sine"
+            if not resume:
+                common["overwrite"] = record.resume
+            run = session.prepare(
+                rig.backend,
+                plan,
+                self.options.setup,
+                path,
+                resume=resume,
+                subscribers=[lambda event: self.publish(record.id, event)],
+                **common,
+            )
+            summary = session.execute(run)
             state, message, n_done = summary.status, summary.message, summary.n_done
         except Exception as exc:
             message = f"{type(exc).__name__}: {exc}"
             logger.error("run %s failed to run: %s", record.id, message)
         finally:
             with self._lock:
-                self._engine = None
+                session.detach()
                 self._current = None
         if self.stopping and state != "success":
             state = "interrupted"

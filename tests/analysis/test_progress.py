@@ -8,17 +8,39 @@ import numpy as np
 import pytest
 
 from analysis.executors import run_jobs
-from analysis.progress import PREFIX, Progress, ProgressReporter, format_duration, parse_line
+from analysis.progress import (
+    PREFIX,
+    Progress,
+    ProgressReporter,
+    format_duration,
+    parse_line,
+    time_left,
+)
 
 
 def test_time_left_is_the_pace_so_far_times_the_work_left():
-    p = Progress("starts", 25, 100, 50.0)
-    assert p.left_s == pytest.approx(150.0)
-    assert Progress("starts", 0, 100, 3.0).left_s is None
-    assert Progress("LM iterations", 7, None, 3.0).left_s is None
-    assert Progress("starts", 100, 100, 200.0).finished
+    assert time_left(50.0, 25, 75) == pytest.approx(150.0)
+    assert time_left(0.0, 1, 99) is None and time_left(3.0, 0, 100) is None
+    p = Progress("starts", 25, 100, 50.0, left_s=150.0)
     assert "about 2 min 30 s left" in p.text() and "25/100" in p.text()
+    assert Progress("starts", 100, 100, 200.0).finished
     assert "done in 3 min 20 s" in Progress("starts", 100, 100, 200.0).text()
+    assert "left" not in Progress("LM iterations", 7, None, 3.0).text()
+
+
+def test_the_pace_is_taken_from_the_units_timed(monkeypatch):
+    # the first report of a stage the reporter did not begin is its clock's start: one unit is
+    # done at t = 0 and says nothing of the pace
+    now = [100.0]
+    monkeypatch.setattr("analysis.progress.time.perf_counter", lambda: now[0])
+    stream = io.StringIO()
+    reporter = ProgressReporter("json", stream)
+    reporter.update("records", 1, 5)
+    first = parse_line(stream.getvalue().splitlines()[-1])
+    assert first.left_s is None
+    now[0] = 110.0
+    reporter.update("records", 2, 5)  # one unit in 10 s, three to come
+    assert parse_line(stream.getvalue().splitlines()[-1]).left_s == pytest.approx(30.0)
 
 
 @pytest.mark.parametrize(
@@ -115,4 +137,4 @@ def test_lhs_costs_report_every_start():
         None, np.ones((6, 2)), None, Cost(), on_done=lambda k, n: seen.append((k, n))
     )
     assert costs.tolist() == [2.0] * 6
-    assert seen == [(k, 6) for k in range(1, 7)]
+    assert seen == [(k, 6) for k in range(0, 7)]
