@@ -146,3 +146,11 @@ def test_cantilever_contact_point_against_time_integration():
     ref = integrate_steady_state(pb, p.omega, p.force[pb.order_k], state_from_balance(pb, p))
     assert ref.converged
     assert np.abs(p.outputs() - ref.outputs()).max() < 0.01 * np.abs(ref.outputs()[0]).max()
+
+
+def test_duffing_script_writes_the_curve_its_folds_and_a_figure(tmp_path, capsys):
+    assert _example("duffing").main([str(tmp_path)]) == 0
+    assert "fold  at 1.353" in capsys.readouterr().out
+    located = (tmp_path / "duffing.located.csv").read_text().splitlines()
+    assert [row.split(",")[0] for row in located[1:]] == ["fold", "fold", "peak"]
+    assert (tmp_path / "duffing.png").stat().st_size > 10_000
