@@ -186,7 +186,7 @@ def cmd_demo(args) -> dict:
         fz = br.omega / (2 * np.pi)
         branches[f"{lv:g} N"] = (fz, 1e3 * np.abs(br.outputs()[:, 0, 0]), br.stable)
         steps[f"{lv:g} N"] = (f, 1e3 * np.abs(res[lv].outputs()[:, 0, 2]))
-        folds = ", ".join(f"{f.omega / (2 * np.pi):.2f} Hz" for f in br.turning_points()) or "none"
+        folds = ", ".join(f"{f.omega / (2 * np.pi):.3f} Hz" for f in br.turning_points()) or "none"
         print(
             f"Branch at {lv:g} N: folds at {folds}; "
             f"{int((~br.stable).sum())} of {len(br.points)} points unstable"
