@@ -30,7 +30,9 @@ def curve(
     model = load_model(HERE / "cantilever_tip_contact.toml")
     model = model.with_values(values) if values else model
     tip = model.assemble().point_dof(1)
-    pb = build_problem_dofs(model, [tip], [tip], orders=[1], n_harmonics=9, n_time=128)
+    # 512 samples: at 128 the Hertz law's onset between samples puts small wiggles, with a
+    # pair of extra folds, near the upper fold
+    pb = build_problem_dofs(model, [tip], [tip], orders=[1], n_harmonics=9, n_time=512)
     w0, w1 = (2 * np.pi * f for f in range_hz)
     # Hill's stability matrix of the 24 structural DOFs (456 x 456 at H = 9) would cost more
     # than the curve itself; the folds bound the unstable part here

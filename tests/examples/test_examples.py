@@ -87,8 +87,8 @@ def test_two_dof_hertz_curve_folds_at_the_stop(hertz):
 @pytest.mark.parametrize("f_hz", [18.0, 28.0, 31.4, 33.0])
 def test_two_dof_hertz_against_time_integration(hertz, f_hz):
     """Stable points of the curve against DOP853 integrated to a periodic steady state from
-    the balanced state: 1 % of the fundamental, each order of both masses (the validation
-    table's tolerance for contact, whose jumps converge slowly in H)."""
+    the balanced state, each order of both masses: 2e-3 of the fundamental (measured 6e-6,
+    7e-5, 3.5e-4 and 2e-6; the contact's jumps converge slowly in H)."""
     pb, branch = hertz
     i = int(np.argmin(np.abs(branch.omega - 2 * np.pi * f_hz)))
     p = branch.points[i]
@@ -96,7 +96,7 @@ def test_two_dof_hertz_against_time_integration(hertz, f_hz):
     ref = integrate_steady_state(pb, p.omega, p.force[pb.order_k], state_from_balance(pb, p))
     assert ref.converged
     hb, ti = p.outputs(), ref.outputs()
-    assert np.abs(hb - ti).max() < 0.01 * np.abs(ti[0]).max()
+    assert np.abs(hb - ti).max() < 2e-3 * np.abs(ti[0]).max()
 
 
 # -- Cantilever with a tip contact -----------------------------------------------------------
