@@ -134,8 +134,8 @@ def test_cantilever_linear_limit_is_the_direct_receptance():
 @pytest.mark.slow
 def test_cantilever_contact_point_against_time_integration():
     """One point on the bent resonance (stable, above the linear resonance, in contact)
-    against DOP853 integrated to a periodic steady state over the 24 DOFs: 1 % of the
-    fundamental at the tip and at the middle node."""
+    against DOP853 integrated to a periodic steady state over the 24 DOFs: 1e-3 of the
+    fundamental at the tip, every harmonic (measured 7e-5)."""
     ex = _example("cantilever_tip_contact")
     pb, branch = ex.curve(range_hz=(38.0, 42.0))
     from analysis.mhb.stability import floquet_exponents
@@ -145,7 +145,7 @@ def test_cantilever_contact_point_against_time_integration():
     assert floquet_exponents(pb, p).stable
     ref = integrate_steady_state(pb, p.omega, p.force[pb.order_k], state_from_balance(pb, p))
     assert ref.converged
-    assert np.abs(p.outputs() - ref.outputs()).max() < 0.01 * np.abs(ref.outputs()[0]).max()
+    assert np.abs(p.q_out - ref.q_out).max() < 1e-3 * np.abs(ref.outputs()[0]).max()
 
 
 def test_duffing_script_writes_the_curve_its_folds_and_a_figure(tmp_path, capsys):
