@@ -64,32 +64,34 @@ def test_duffing_folds_and_peak_are_located_to_the_newton_tolerance():
     assert peak.omega < folds[0].omega and peak.amplitude > folds[0].amplitude
 
 
-def test_every_turning_point_of_a_two_mode_curve_is_a_fold():
-    # two hardening modes, each bent over: four turning points, each a singular balance
+def test_every_turning_point_of_a_four_mode_curve_is_a_fold():
+    # a 4-DOF chain with a hardening cubic spring at every DOF, driven hard enough that each
+    # of its four resonances bends over: eight turning points, each a singular balance
     # Jacobian at fixed frequency (an independent check of what a fold is)
-    M, K = np.eye(2), np.array([[2.0, -1.0], [-1.0, 2.0]])
-    lin = DirectLinearModel(M, 0.02 * M + 0.002 * K, K)
-    atts = [Attachment(make_element("cubic_spring", k3=1.0), d, None, f"c{d}") for d in (0, 1)]
-    pb = HarmonicProblem(lin, atts, [0], [0, 1], orders=(1,), n_harmonics=1, n_time=16)
-    br = continue_branch(
-        pb, 0.5, 3.0, np.array([[0.05]]), ContinuationSettings(ds=0.05, stability=False)
-    )
+    n = 4
+    M, K = np.eye(n), 2 * np.eye(n) - np.eye(n, k=1) - np.eye(n, k=-1)
+    K[-1, -1] = 1.0
+    lin = DirectLinearModel(M, 0.01 * M + 0.002 * K, K)
+    atts = [Attachment(make_element("cubic_spring", k3=1.0), d, None, f"c{d}") for d in range(n)]
+    pb = HarmonicProblem(lin, atts, [0], list(range(n)), orders=(1,), n_harmonics=1, n_time=16)
+    settings = ContinuationSettings(ds=0.1, ds_max=0.5, max_points=5000, stability=False)
+    br = continue_branch(pb, 0.2, 2.5, np.array([[0.05]]), settings)
     folds = br.turning_points()
-    assert len(folds) == 4 and br.message == "reached the end frequency"
+    assert len(folds) == 8 and br.message == "reached the end frequency"
     assert np.all(np.diff([f.after for f in folds]) > 0)
 
     def smallest_singular_ratio(p):
-        s = np.linalg.svd(
-            np.eye(pb.basis.size * 2) - p.lin["prep"]["G"] @ p.lin["dF"], False, False
-        )
+        J = np.eye(pb.basis.size * n) - p.lin["prep"]["G"] @ p.lin["dF"]
+        s = np.linalg.svd(J, compute_uv=False)
         return s[-1] / s[0]
 
     for f in folds:
         assert smallest_singular_ratio(f.point) < 1e-8
-        assert smallest_singular_ratio(br.points[f.after]) > 1e-5
-    # the two modes' folds: resonance bent to higher frequency, jump-up below it
-    w = [f.omega for f in folds]
-    assert w[0] > w[1] and w[2] > w[3] and w[1] < w[2]
+        assert smallest_singular_ratio(br.points[f.after]) > 1e-6
+    # per mode: the resonance bent to higher frequency, then the jump-up fold below it, and
+    # the next mode's folds above both
+    w = np.array([f.omega for f in folds])
+    assert np.all(w[0::2] > w[1::2]) and np.all(w[2::2] > w[1:-1:2])
 
 
 def _chord_distance(br, pb, force):
