@@ -4,7 +4,7 @@ Commands
 --------
 modes            natural frequencies of a model and the beam's share of each mode
 sweep            stepped multi-harmonic FRFs by MHB (the paper's frequency plan by default)
-continuation     a branch through its folds with Hill stability
+continuation     a frequency-response curve of any model through its folds (located)
 export-matrices  write M and K of a model (npz, mtx or mat) with its DOF map
 calibrate-linear linear calibration of a random run (damping equalization)
 plan             pretest planning: rank test configurations by det(FIM)
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis.logs import add_debug_option, configure_logging, note_inputs, summarise_repeats
-from analysis.mhb.continuation import ContinuationSettings, continue_branch
+from analysis.mhb.continuation import continue_branch
 from analysis.mhb.sweep import solve_steps
 from analysis.model import load_model
 from analysis.paper import PAPER_CALIBRATED, paper_frequencies_hz
@@ -141,44 +141,6 @@ def cmd_sweep(args) -> dict:
     return summary
 
 
-def cmd_continuation(args) -> dict:
-    from analysis.report import plot_branches
-
-    model = _model(args)
-    pb = build_problem(model, output_points=[int(args.point)])
-    F = np.array([args.level, 0.02 * args.level, 0.02 * args.level])
-    t0 = time.perf_counter()
-    br = continue_branch(
-        pb, 2 * np.pi * args.start, 2 * np.pi * args.stop, F, ContinuationSettings(ds=args.ds)
-    )
-    wall = time.perf_counter() - t0
-    fz = br.omega / (2 * np.pi)
-    amp = np.abs(br.outputs()[:, 0, 0])
-    summary = {
-        "points": len(br.points),
-        "folds_hz": [float(fz[i]) for i in br.folds],
-        "unstable_points": int((~br.stable).sum()),
-        "message": br.message,
-        "wall_s": round(wall, 3),
-    }
-    if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        png = plot_branches(
-            {f"{args.level:g} N": (fz, 1e3 * amp, br.stable)},
-            out / "branch.png",
-            title=f"Branch at point {args.point}",
-        )
-        summary["figure"] = str(png)
-    if not args.json:
-        print(
-            f"{len(br.points)} points ({br.message}) in {wall:.2f} s; folds at "
-            + ", ".join(f"{x:.3f} Hz" for x in summary["folds_hz"])
-            + f"; {summary['unstable_points']} unstable points"
-        )
-    return summary
-
-
 def cmd_export(args) -> dict:
     from analysis.matrix_io import export_linear
 
@@ -224,7 +186,7 @@ def cmd_demo(args) -> dict:
         fz = br.omega / (2 * np.pi)
         branches[f"{lv:g} N"] = (fz, 1e3 * np.abs(br.outputs()[:, 0, 0]), br.stable)
         steps[f"{lv:g} N"] = (f, 1e3 * np.abs(res[lv].outputs()[:, 0, 2]))
-        folds = ", ".join(f"{fz[i]:.2f} Hz" for i in br.folds) or "none"
+        folds = ", ".join(f"{f.omega / (2 * np.pi):.3f} Hz" for f in br.turning_points()) or "none"
         print(
             f"Branch at {lv:g} N: folds at {folds}; "
             f"{int((~br.stable).sum())} of {len(br.points)} points unstable"
@@ -287,15 +249,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--out", help="folder for the figure")
     sp.set_defaults(func=cmd_sweep)
 
-    sp = sub.add_parser("continuation", help="branch with folds and stability")
-    common(sp)
-    sp.add_argument("--level", type=float, default=8.0, help="force amplitude [N]")
-    sp.add_argument("--start", type=float, default=22.0, help="start frequency [Hz]")
-    sp.add_argument("--stop", type=float, default=34.0, help="end frequency [Hz]")
-    sp.add_argument("--point", type=int, default=7, help="output point")
-    sp.add_argument("--ds", type=float, default=0.02, help="initial arclength step")
-    sp.add_argument("--out", help="folder for the figure")
-    sp.set_defaults(func=cmd_continuation)
+    from analysis.continuation_cli import add_parser as add_continuation_parser
+
+    add_continuation_parser(sub)
 
     sp = sub.add_parser("export-matrices", help="write M, K with the DOF map")
     common(sp)

@@ -221,6 +221,8 @@ class Model:
                 "for extreme values (coordinates, sections, materials, springs)",
             ) from None
         model.check_elements()
+        if not model.damping.modal:
+            model.damping_matrices()  # a wrong size or an unreadable file is told on loading
         model.warn_out_of_bounds()
         return model
 
@@ -499,6 +501,61 @@ class Model:
         return dataclasses.replace(self, frame=frame, _shared=_Shared())
 
     # -- assembly ------------------------------------------------------------------------
+    def damping_matrices(self) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
+        """Viscous damping ``C`` [N s/m] over the free DOFs and its derivatives per linear
+        parameter, from ``damping.rayleigh`` or ``damping.matrix``; None for modal damping.
+
+        Raises
+        ------
+        ModelFileError
+            Naming ``damping.matrix`` (wrong size, unreadable file, non-finite entries) or
+            ``damping`` (a linear part that brings its own C as well).
+        """
+        d = self.damping
+        if d.modal:
+            return None
+        asm = self.assemble()
+        if asm.C is not None:
+            raise ModelFileError(
+                self.source,
+                "damping",
+                "the linear part brings its own C matrix; drop "
+                "damping.rayleigh / damping.matrix or the linear part's C",
+            )
+        if d.rayleigh is not None:
+            alpha, beta = d.rayleigh
+            dC = {n: alpha * asm.dM[n] + beta * asm.dK[n] for n in asm.dM}
+            return alpha * asm.M + beta * asm.K, dC
+        C = self._damping_matrix_values(asm.n_dofs)
+        return C, {n: np.zeros_like(C) for n in asm.dM}
+
+    def _damping_matrix_values(self, n: int) -> np.ndarray:
+        src = self.damping.matrix
+        try:
+            if isinstance(src, str):
+                if src.endswith(".npy"):
+                    C = np.load(src, allow_pickle=False)
+                else:
+                    import scipy.io
+
+                    C = scipy.io.mmread(src)
+                    C = C.toarray() if hasattr(C, "toarray") else C
+            else:
+                C = src
+            C = np.array(C, dtype=float)
+        except (OSError, ValueError) as exc:
+            raise ModelFileError(self.source, "damping.matrix", str(exc)) from None
+        if C.shape != (n, n):
+            raise ModelFileError(
+                self.source,
+                "damping.matrix",
+                f"expected {n} x {n} (the model's free DOFs, "
+                f"in the order of Model.assemble().dofs), got {' x '.join(map(str, C.shape))}",
+            )
+        if not np.all(np.isfinite(C)):
+            raise ModelFileError(self.source, "damping.matrix", "has non-finite entries")
+        return C
+
     def assemble(self) -> Assembly:
         """M, K and their exact derivatives at the current values (cached per values)."""
         linear = self.parameter_names(group="linear")

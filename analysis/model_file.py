@@ -36,11 +36,32 @@ RESERVED = ("rigid", "free")
 MAX_COORDINATE_M = 1e4
 """Largest coordinate accepted [m] (a structure on a test rig; larger values are typos)."""
 _TOP_KEYS = {
-    "title", "nodes", "sections", "materials", "members", "joints", "springs", "masses",
-    "supports", "points", "parameters", "nonlinear", "damping", "linear_part", "truth",
-}  # fmt: skip
-_FILE_KEYS = {"b_m": "b", "h_m": "h", "outer_m": "outer", "wall_m": "wall", "area_m2": "A",
-              "inertia_m4": "I", "max_element_length_m": "max_element_length"}  # fmt: skip
+    "title",
+    "nodes",
+    "sections",
+    "materials",
+    "members",
+    "joints",
+    "springs",
+    "masses",
+    "supports",
+    "points",
+    "parameters",
+    "nonlinear",
+    "damping",
+    "linear_part",
+    "truth",
+}
+_FILE_KEYS = {
+    "b_m": "b",
+    "h_m": "h",
+    "outer_m": "outer",
+    "wall_m": "wall",
+    "area_m2": "A",
+    "inertia_m4": "I",
+    "max_element_length_m": "max_element_length",
+}
+DAMPING_MODAL = ("default_zeta", "per_mode")
 _FRAME_KEYS = ("nodes", "sections", "materials", "members", "joints", "springs", "masses")
 
 
@@ -158,10 +179,22 @@ class NonlinearSpec:
 
 @dataclass(frozen=True)
 class DampingSpec:
-    """Modal damping ratios: ``default_zeta`` and ``per_mode`` (1-based, ascending frequency)."""
+    """Damping of the linear part: one of three forms.
+
+    - modal ratios: ``default_zeta`` and ``per_mode`` (1-based, ascending frequency);
+    - Rayleigh damping ``C = alpha M + beta K``: ``rayleigh = (alpha [1/s], beta [s])``;
+    - an explicit viscous damping matrix over the model's free DOFs (in the order of
+      ``Model.assemble().dofs``): ``matrix``, rows of numbers or the absolute path of a
+      ``.npy`` or MatrixMarket ``.mtx`` file [N s/m].
+
+    With ``rayleigh`` or ``matrix`` the modal ratios are not used (the linear part is then
+    solved directly from ``K - w^2 M + i w C``).
+    """
 
     default_zeta: float = 0.01
     per_mode: dict[int, float] = field(default_factory=dict)
+    rayleigh: tuple[float, float] | None = None
+    matrix: tuple[tuple[float, ...], ...] | str | None = None
 
     def __post_init__(self) -> None:
         if not 0 <= self.default_zeta < 1:
@@ -172,6 +205,25 @@ class DampingSpec:
             if not 0 <= zeta < 1:
                 raise ValueError(f"per_mode.{mode}: must be in [0, 1), got {zeta!r}")
         object.__setattr__(self, "per_mode", dict(sorted(self.per_mode.items())))
+        if self.rayleigh is not None:
+            alpha, beta = (float(v) for v in self.rayleigh)
+            if not (alpha >= 0 and beta >= 0 and math.isfinite(alpha + beta)):
+                raise ValueError(
+                    f"rayleigh: alpha and beta must be finite and >= 0, got {self.rayleigh!r}"
+                )
+            object.__setattr__(self, "rayleigh", (alpha, beta))
+        if self.rayleigh is not None and self.matrix is not None:
+            raise ValueError("rayleigh: give either rayleigh or matrix, not both")
+        if isinstance(self.matrix, list | tuple):
+            rows = tuple(tuple(float(v) for v in row) for row in self.matrix)
+            if not rows or any(len(row) != len(rows) for row in rows):
+                raise ValueError("matrix: expected a square array of rows")
+            object.__setattr__(self, "matrix", rows)
+
+    @property
+    def modal(self) -> bool:
+        """True for modal damping ratios (neither Rayleigh nor an explicit matrix)."""
+        return self.rayleigh is None and self.matrix is None
 
     def zeta(self, n_modes: int) -> list[float]:
         """Damping ratio of modes 1..n_modes."""
@@ -202,8 +254,10 @@ class _Reader:
         if not isinstance(value, dict):
             self.fail(path, f"expected a table, got {type(value).__name__}")
         if allowed is not None and (unknown := set(value) - allowed):
-            self.fail(f"{path}.{sorted(unknown)[0]}" if path else sorted(unknown)[0],
-                      f"unknown key; expected one of {sorted(allowed)}")  # fmt: skip
+            self.fail(
+                f"{path}.{sorted(unknown)[0]}" if path else sorted(unknown)[0],
+                f"unknown key; expected one of {sorted(allowed)}",
+            )
         return value
 
     def array(self, value: Any, path: str) -> list:
@@ -276,7 +330,8 @@ def _member(r: _Reader, t: dict, path: str, i: int) -> Member:
     max_len = t.get("max_element_length")
     max_len = None if max_len is None else r.finite(max_len, f"{path}.max_element_length")
     return r.build(
-        Member, path,
+        Member,
+        path,
         name=r.text(t.get("name", f"m{i}"), f"{path}.name"),
         nodes=tuple(r.text(n, f"{path}.nodes") for n in nodes),
         section=r.text(r.need(t, "section", path), f"{path}.section"),
@@ -285,7 +340,7 @@ def _member(r: _Reader, t: dict, path: str, i: int) -> Member:
         max_element_length_m=max_len,
         nsm_kg_per_m=r.coef(t.get("nsm", 0.0), f"{path}.nsm"),
         group=r.text(t.get("group", "frame"), f"{path}.group"),
-    )  # fmt: skip
+    )
 
 
 def _joint(r: _Reader, t: dict, path: str, i: int) -> Joint:
@@ -335,32 +390,42 @@ def _frame(r: _Reader, doc: dict) -> FrameSpec:
         p = f"springs[{i}]"
         r.table(t, p, {"name", "node", "direction", "k", "to"})
         to = t.get("to")
-        springs.append(Spring(
-            name=r.text(t.get("name", f"spring{i}"), f"{p}.name"),
-            node=r.text(r.need(t, "node", p), f"{p}.node"),
-            direction=r.direction(r.need(t, "direction", p), f"{p}.direction"),
-            k=r.coef(r.need(t, "k", p), f"{p}.k"),
-            to=None if to is None else r.text(to, f"{p}.to"),
-        ))  # fmt: skip
+        springs.append(
+            Spring(
+                name=r.text(t.get("name", f"spring{i}"), f"{p}.name"),
+                node=r.text(r.need(t, "node", p), f"{p}.node"),
+                direction=r.direction(r.need(t, "direction", p), f"{p}.direction"),
+                k=r.coef(r.need(t, "k", p), f"{p}.k"),
+                to=None if to is None else r.text(to, f"{p}.to"),
+            )
+        )
     masses = []
     for i, t in enumerate(r.array(doc.get("masses", []), "masses")):
         p = f"masses[{i}]"
         r.table(t, p, {"name", "node", "m", "J", "group"})
-        masses.append(LumpedMass(
-            name=r.text(t.get("name", f"mass{i}"), f"{p}.name"),
-            node=r.text(r.need(t, "node", p), f"{p}.node"),
-            m_kg=r.coef(r.need(t, "m", p), f"{p}.m"),
-            J_kgm2=r.coef(t.get("J", 0.0), f"{p}.J"),
-            group=r.text(t.get("group", "lumped"), f"{p}.group"),
-        ))  # fmt: skip
+        masses.append(
+            LumpedMass(
+                name=r.text(t.get("name", f"mass{i}"), f"{p}.name"),
+                node=r.text(r.need(t, "node", p), f"{p}.node"),
+                m_kg=r.coef(r.need(t, "m", p), f"{p}.m"),
+                J_kgm2=r.coef(t.get("J", 0.0), f"{p}.J"),
+                group=r.text(t.get("group", "lumped"), f"{p}.group"),
+            )
+        )
     supports = {}
     for node, dirs in r.table(doc.get("supports", {}), "supports").items():
         dirs = list(DIRECTIONS) if dirs == "all" else r.array(dirs, f"supports.{node}")
         supports[node] = tuple(r.direction(d, f"supports.{node}[{k}]") for k, d in enumerate(dirs))
     return FrameSpec(
-        nodes=nodes, sections=sections, materials=materials, members=members,
-        joints=joints, springs=tuple(springs), masses=tuple(masses), supports=supports,
-    )  # fmt: skip
+        nodes=nodes,
+        sections=sections,
+        materials=materials,
+        members=members,
+        joints=joints,
+        springs=tuple(springs),
+        masses=tuple(masses),
+        supports=supports,
+    )
 
 
 def _parameter(r: _Reader, name: str, t: dict, group: str | None) -> Parameter:
@@ -459,6 +524,50 @@ def _linear_part(r: _Reader, t: dict, base: Path) -> LinearPartSpec:
     return LinearPartSpec(format=fmt, files=files, dof_map=dof_map, masses=masses)
 
 
+def _damping(r: _Reader, t: dict, base: Path) -> DampingSpec:
+    r.table(t, "damping", {"default_zeta", "per_mode", "rayleigh", "matrix"})
+    per_mode = r.table(t.get("per_mode", {}), "damping.per_mode")
+    for k in per_mode:
+        if not (k.isascii() and k.isdigit()):
+            r.fail(f"damping.per_mode.{k}", "mode numbers are positive integers")
+    if ("rayleigh" in t or "matrix" in t) and (modal := [k for k in t if k in DAMPING_MODAL]):
+        other = "rayleigh" if "rayleigh" in t else "matrix"
+        r.fail(
+            f"damping.{modal[0]}", f"modal damping ratios and damping.{other} exclude each other"
+        )
+    rayleigh = None
+    if "rayleigh" in t:
+        ray = r.table(t["rayleigh"], "damping.rayleigh", {"alpha", "beta"})
+        rayleigh = tuple(
+            r.finite(ray.get(k, 0.0), f"damping.rayleigh.{k}") for k in ("alpha", "beta")
+        )
+        for k, v in zip(("alpha", "beta"), rayleigh, strict=True):
+            if v < 0:
+                r.fail(f"damping.rayleigh.{k}", f"must be >= 0, got {v!r}")
+    matrix = t.get("matrix")
+    if isinstance(matrix, str):
+        if not matrix.endswith((".npy", ".mtx")):
+            r.fail("damping.matrix", f"a .npy or .mtx file, got {matrix!r}")
+        matrix = str((base / matrix).resolve())
+    elif matrix is not None:
+        rows = r.array(matrix, "damping.matrix")
+        matrix = tuple(
+            tuple(
+                r.finite(v, f"damping.matrix[{i}][{j}]")
+                for j, v in enumerate(r.array(row, f"damping.matrix[{i}]"))
+            )
+            for i, row in enumerate(rows)
+        )
+    return r.build(
+        DampingSpec,
+        "damping",
+        default_zeta=r.finite(t.get("default_zeta", 0.01), "damping.default_zeta"),
+        per_mode={int(k): r.finite(v, f"damping.per_mode.{k}") for k, v in per_mode.items()},
+        rayleigh=rayleigh,
+        matrix=matrix,
+    )
+
+
 def _groups(doc: dict) -> dict[str, str]:
     """``"nonlinear"`` for parameter names used by nonlinear elements (the default group of a
     parameter without an explicit ``group``; all others default to ``"linear"``)."""
@@ -491,8 +600,11 @@ def parse_document(doc: dict, source: str, *, allow_truth: bool = False) -> dict
     r = _Reader(source)
     r.table(doc, "", _TOP_KEYS)
     if "truth" in doc and not allow_truth:
-        r.fail("truth", "this model file holds the simulated truth; only the simulator may "
-               "load it (load_model(..., allow_truth=True))")  # fmt: skip
+        r.fail(
+            "truth",
+            "this model file holds the simulated truth; only the simulator may "
+            "load it (load_model(..., allow_truth=True))",
+        )
     linear = "linear_part" in doc
     if linear and (frame_keys := [k for k in (*_FRAME_KEYS, "supports") if k in doc]):
         r.fail(frame_keys[0], "a model with [linear_part] cannot also define a frame")
@@ -505,16 +617,7 @@ def parse_document(doc: dict, source: str, *, allow_truth: bool = False) -> dict
         n: _parameter(r, n, r.table(t, f"parameters.{n}"), groups.get(n))
         for n, t in r.table(doc.get("parameters", {}), "parameters").items()
     }
-    damping = r.table(doc.get("damping", {}), "damping", {"default_zeta", "per_mode"})
-    per_mode = r.table(damping.get("per_mode", {}), "damping.per_mode")
-    for k in per_mode:
-        if not (k.isascii() and k.isdigit()):
-            r.fail(f"damping.per_mode.{k}", "mode numbers are positive integers")
-    damping = r.build(
-        DampingSpec, "damping",
-        default_zeta=r.finite(damping.get("default_zeta", 0.01), "damping.default_zeta"),
-        per_mode={int(k): r.finite(v, f"damping.per_mode.{k}") for k, v in per_mode.items()},
-    )  # fmt: skip
+    damping = _damping(r, r.table(doc.get("damping", {}), "damping"), base)
     nonlinear = tuple(
         _nonlinear(r, r.table(t, f"nonlinear[{i}]"), f"nonlinear[{i}]", dirs)
         for i, t in enumerate(r.array(doc.get("nonlinear", []), "nonlinear"))
@@ -641,7 +744,14 @@ def to_document(model: Any, base: Path | None = None) -> dict:
         for s in model.nonlinear
     ]
     d = model.damping
-    doc["damping"] = {"default_zeta": d.default_zeta}
+    if d.rayleigh is not None:
+        doc["damping"] = {"rayleigh": {"alpha": d.rayleigh[0], "beta": d.rayleigh[1]}}
+    elif isinstance(d.matrix, str):
+        doc["damping"] = {"matrix": _relative(d.matrix, base)}
+    elif d.matrix is not None:
+        doc["damping"] = {"matrix": [list(row) for row in d.matrix]}
+    else:
+        doc["damping"] = {"default_zeta": d.default_zeta}
     if d.per_mode:
         doc["damping"]["per_mode"] = {str(k): v for k, v in d.per_mode.items()}
     if model.truth is not None:

@@ -30,7 +30,8 @@ DEFAULT_TIME_SAMPLES = 128
 
 
 def build_linear(model: Model, *, f_max_hz: float = 2000.0):
-    """The linear model (modal with residual flexibility, or direct if C is given).
+    """The linear model (modal with residual flexibility, or direct if C is given or built
+    from the model file's Rayleigh coefficients or damping matrix).
 
     Parameters
     ----------
@@ -41,6 +42,10 @@ def build_linear(model: Model, *, f_max_hz: float = 2000.0):
     asm = model.assemble()
     if asm.C is not None:
         return DirectLinearModel(asm.M, asm.C, asm.K, dM=asm.dM, dK=asm.dK)
+    damping = model.damping_matrices()
+    if damping is not None:  # Rayleigh or an explicit C: no modal damping ratios to apply
+        C, dC = damping
+        return DirectLinearModel(asm.M, C, asm.K, dM=asm.dM, dC=dC, dK=asm.dK)
     return ModalLinearModel(
         asm.M,
         asm.K,

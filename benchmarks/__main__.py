@@ -15,6 +15,7 @@ import sys  # noqa: E402
 
 SCENARIOS = {
     "calibrate": "benchmarks.calibrate",
+    "continuation": "benchmarks.continuation",
     "coverage": "benchmarks.coverage",
     "diagnose": "benchmarks.diagnose",
     "mhb": "benchmarks.mhb",

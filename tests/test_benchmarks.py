@@ -21,3 +21,16 @@ def test_mhb_benchmark_quick_run_reports_its_keys():
         assert key in figures
     assert figures["converged_fraction"] == 1.0
     assert figures["max_rel_diff"] <= 0.01
+
+
+def test_continuation_benchmark_quick_run_reports_its_keys():
+    r = subprocess.run(
+        [sys.executable, "-m", "benchmarks", "continuation", "--quick"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode == 0, r.stderr
+    figures = json.loads(r.stdout.strip().splitlines()[-1])
+    assert figures["duffing_folds"] == 2
+    assert figures["located_max_rel_err"] < 1e-9

@@ -93,6 +93,15 @@ class MHBPoint:
         """Output phasors at the excitation orders, shape (n_orders, n_out) [m]."""
         return self.q_out[self.order_k]
 
+    def time_history(
+        self, problem: HarmonicProblem, dofs, n: int = 256, quantity: str = "displacement"
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Time history of any structural DOFs over one base period: ``(t [s], q)``,
+        ``q`` of shape (n, n_dofs) (see :func:`analysis.mhb.histories.time_history`)."""
+        from analysis.mhb.histories import time_history
+
+        return time_history(problem, self, dofs, n, quantity)
+
     def frf(self, force_column: int = 0) -> np.ndarray:
         """Multi-harmonic FRFs ``H^nu = Q_nu / F_nu``, shape (n_orders, n_out) [m/N]."""
         F = self.force[self.order_k, force_column]
@@ -149,6 +158,44 @@ def _recover(problem: HarmonicProblem, prep: dict, F: np.ndarray | None) -> np.n
     return q
 
 
+def _linear_point(problem: HarmonicProblem, omega: float, prep: dict) -> MHBPoint:
+    """The solution of a problem without nonlinear DOFs (the linear response)."""
+    b = problem.basis
+    return MHBPoint(
+        omega,
+        np.zeros((b.size, 0)),
+        np.zeros((b.n_harmonics + 1, 0), complex),
+        np.zeros((b.n_harmonics + 1, 0), complex),
+        _recover(problem, prep, None),
+        prep["Fk"],
+        True,
+        0,
+        0.0,
+        "linear",
+        problem.order_k,
+    )
+
+
+def _line_search(residual, X: np.ndarray, dX: np.ndarray, R: np.ndarray, max_halvings: int):
+    """Backtracking on ``|R|`` along the Newton step: ``(X, R, F, dF)`` of the step taken,
+    or None when no trial decreases the residual."""
+    alpha, r2 = 1.0, np.linalg.norm(R)
+    for _ in range(max_halvings + 1):
+        # the full step with its Jacobian (usually taken); shorter trials without
+        Xt = X + alpha * dX
+        Rt, Ft, dFt = residual(Xt, alpha == 1.0)
+        rt2 = np.linalg.norm(Rt)
+        if np.isfinite(rt2) and rt2 < (1 - 1e-4 * alpha) * r2:
+            break
+        alpha *= 0.5
+    else:
+        if not (np.isfinite(rt2) and rt2 < r2):
+            return None
+    if dFt is None:
+        Rt, Ft, dFt = residual(Xt, True)
+    return Xt, Rt, Ft, dFt
+
+
 def solve_point(
     problem: HarmonicProblem,
     omega: float,
@@ -179,20 +226,7 @@ def solve_point(
     b = problem.basis
     n = problem.n_nl
     if n == 0:
-        q_out = _recover(problem, prep, None)
-        return MHBPoint(
-            omega,
-            np.zeros((b.size, 0)),
-            np.zeros((b.n_harmonics + 1, 0), complex),
-            np.zeros((b.n_harmonics + 1, 0), complex),
-            q_out,
-            prep["Fk"],
-            True,
-            0,
-            0.0,
-            "linear",
-            problem.order_k,
-        )
+        return _linear_point(problem, omega, prep)
     G, X_lin, wb = prep["G"], prep["X_lin"], prep["omega_b"]
     X = X_lin.copy() if X0 is None else np.array(X0, dtype=float).reshape(b.size, n)
     scale = max(np.abs(X_lin).max(), 1e-300)
@@ -224,22 +258,12 @@ def solve_point(
         except np.linalg.LinAlgError:
             message = "singular Jacobian"
             break
-        alpha, r2 = 1.0, np.linalg.norm(R)
-        for _ in range(st.max_halvings + 1):
-            # the full step with its Jacobian (usually taken); shorter trials without
-            Xt = X + alpha * dX
-            Rt, Ft, dFt = residual(Xt, alpha == 1.0)
-            rt2 = np.linalg.norm(Rt)
-            if np.isfinite(rt2) and rt2 < (1 - 1e-4 * alpha) * r2:
-                break
-            alpha *= 0.5
-        else:
-            if not (np.isfinite(rt2) and rt2 < r2):
-                message = "line search failed (no descent)"
-                break
-        if dFt is None:
-            Rt, Ft, dFt = residual(Xt, True)
-        X, R, F, dF, rn = Xt, Rt, Ft, dFt, np.abs(Rt).max()
+        step = _line_search(residual, X, dX, R, st.max_halvings)
+        if step is None:
+            message = "line search failed (no descent)"
+            break
+        X, R, F, dF = step
+        rn = np.abs(R).max()
     else:
         if rn <= st.rtol * max(np.abs(X).max(), scale) + st.atol:
             converged, message = True, "converged"

@@ -77,6 +77,22 @@ def _force_homotopy(problem, omega, force, settings, n_sub) -> MHBPoint:
     return point
 
 
+def _rescue(problem, omega, force, p, last, last_force, settings, max_depth) -> MHBPoint:
+    """A step that failed from the previous solution: from its linear response, then in
+    sub-steps from the last converged step, then by raising the force (``p`` if all fail)."""
+    # the branch followed may have ended (a jump): try the linear response first
+    q = solve_point(problem, omega, force, None, settings)
+    if q.converged:
+        return q
+    if last is not None:
+        for depth in range(1, max_depth + 1):
+            p = _substep(problem, last.omega, last_force, last.X, omega, force, settings, depth)
+            if p.converged:
+                return p
+    q = _force_homotopy(problem, omega, force, settings, 2**max_depth)
+    return q if q.converged else p
+
+
 def solve_steps(
     problem: HarmonicProblem,
     omega: np.ndarray,
@@ -136,21 +152,9 @@ def solve_steps(
         if not p.converged and X_start is not X:
             p = solve_point(problem, omega[i], force[i], X, settings)
         if not p.converged:
-            # the branch followed may have ended (a jump): try the linear response first
-            q = solve_point(problem, omega[i], force[i], None, settings)
-            if q.converged:
-                p = q
-        if not p.converged and last is not None:
-            for depth in range(1, max_substep_depth + 1):
-                p = _substep(
-                    problem, last.omega, last_force, last.X, omega[i], force[i], settings, depth
-                )
-                if p.converged:
-                    break
-        if not p.converged:
-            q = _force_homotopy(problem, omega[i], force[i], settings, 2**max_substep_depth)
-            if q.converged:
-                p = q
+            p = _rescue(
+                problem, omega[i], force[i], p, last, last_force, settings, max_substep_depth
+            )
         if not p.converged:
             log.warning(
                 "MHB step %d (%.4g Hz) did not converge: %s", i, omega[i] / (2 * np.pi), p.message

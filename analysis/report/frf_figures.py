@@ -86,6 +86,8 @@ def plot_branches(
     steps: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
     title: str = "",
     ylabel: str = "tip amplitude, order 1 [mm]",
+    xlabel: str = "fundamental frequency [Hz]",
+    marks: dict[str, tuple[Sequence[float], Sequence[float]]] | None = None,
 ) -> Path:
     """Continued branches with stable parts solid and unstable parts dashed.
 
@@ -96,6 +98,8 @@ def plot_branches(
         Stepped solutions drawn as markers (what a stepped-sine test follows).
     path : str or Path
         PNG file to write.
+    marks : dict label -> (x, y), optional
+        Located points (folds, peaks) drawn as black markers.
     """
     fig, ax = plt.subplots(figsize=(8, 5))
     for i, (label, (f, a, stable)) in enumerate(branches.items()):
@@ -108,7 +112,9 @@ def plot_branches(
         ax.plot(f, np.where(st > 0, np.nan, a), "--", color=color, label=f"{label} unstable")
     for i, (label, (f, a)) in enumerate((steps or {}).items()):
         ax.plot(f, a, "o", ms=3, color=f"C{i}", alpha=0.6, label=f"{label} stepped")
-    ax.set_xlabel("fundamental frequency [Hz]")
+    for symbol, (label, (x, y)) in zip("xv^s", (marks or {}).items(), strict=False):
+        ax.plot(x, y, symbol, color="k", ms=7, label=label)
+    ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, ncol=2, loc="best", frameon=True, framealpha=0.9)
