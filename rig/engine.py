@@ -254,12 +254,7 @@ class RunEngine:
         -------
         RunOutcome
         """
-        self._sink = sink
-        self._state = "running"
-        self._steps_written = 0
-        self._driven = False
-        self._samples_read = 0
-        self._mute_error = ""
+        self._reset(sink)
         t0 = time.monotonic()
         status, message, kind, interrupted = "success", "", "", False
         gen = None
@@ -294,19 +289,7 @@ class RunEngine:
         finally:
             with deferred_interrupts():
                 stop_error = self._shutdown(gen)
-        if stop_error:
-            ending = (
-                f"Ramping the output to 0 V FAILED ({stop_error}): the output may not be at 0 V, "
-                "check the amplifier and the DAQ output"
-            )
-            message = f"{message}. {ending}" if message else ending
-            message = f"{message}; {self._steps_written} step(s) written"
-        elif status != "success":
-            output = "Output ramped to 0 V" if self._driven else "Output at 0 V (never driven)"
-            message = f"{message}. {output}; {self._steps_written} step(s) written"
-        if self._mute_error:
-            ending = f"muting the amplifier FAILED ({self._mute_error})"
-            message = f"{message}; {ending}" if message else ending
+        message = self._ending(status, message, stop_error)
         outcome = RunOutcome(
             status,
             message,
@@ -323,6 +306,32 @@ class RunEngine:
         log("run ended: %s %s", status, message)
         self.publish(RunFinished(status, message))
         return outcome
+
+    def _reset(self, sink: Any) -> None:
+        self._sink = sink
+        self._state = "running"
+        self._steps_written = 0
+        self._driven = False
+        self._samples_read = 0
+        self._mute_error = ""
+
+    def _ending(self, status: str, message: str, stop_error: str) -> str:
+        """``message`` with what happened to the output (and the amplifier) at the end: said
+        only as it happened."""
+        if stop_error:
+            ending = (
+                f"Ramping the output to 0 V FAILED ({stop_error}): the output may not be at 0 V, "
+                "check the amplifier and the DAQ output"
+            )
+            message = f"{message}. {ending}" if message else ending
+            message = f"{message}; {self._steps_written} step(s) written"
+        elif status != "success":
+            output = "Output ramped to 0 V" if self._driven else "Output at 0 V (never driven)"
+            message = f"{message}. {output}; {self._steps_written} step(s) written"
+        if self._mute_error:
+            ending = f"muting the amplifier FAILED ({self._mute_error})"
+            message = f"{message}; {ending}" if message else ending
+        return message
 
     def _start(self) -> RunContext:
         config = self.setup.acquisition_config(self.channels, self.sample_rate_hz)

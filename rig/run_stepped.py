@@ -228,31 +228,17 @@ def _one_step(
     step stalls at a turning point of the force-drive curve, control starts again on its far
     side, from a drive chosen with it (:func:`_fold_probe`).
     """
-    acq, policy = plan.acquisition, plan.control
-    orders = plan.excitation.orders
-    fi = ctx.drive_force_index
+    acq, policy, settings = plan.acquisition, plan.control, plan.control.settings
+    fi, i1 = ctx.drive_force_index, settings.fundamental_index
     targets = plan.excitation.spec.force_targets(step.level_n)
-    settings = plan.control.settings
-    i1 = settings.fundamental_index
     drive = controller.start_step(targets, start_gain, start_drive)
     settle = acq.settle_periods
     history: list[tuple[np.ndarray, Measurement]] = []
     runs: list[StepControlRecord] = []
     where = f"at {step.frequency_hz:.4g} Hz, {step.level_n:g} N (step {step.plan_index})"
-    accepted, reason = False, ""
-    probed = False
+    accepted, reason, probed = False, "", False
     while True:
-        yield SetDrive(step.frequency_hz, drive, orders, acq.ramp_s)
-        m = yield Acquire(
-            settle_periods=settle,
-            blocks=acq.average_blocks,
-            block_periods=acq.block_periods,
-            max_settle_periods=acq.max_settle_periods,
-            settling_tolerance=acq.settling_tolerance,
-            drift_tolerance=acq.drift_tolerance,
-            keep_samples=acq.store_raw,
-            extra_orders=plan.extra_orders,
-        )
+        m = yield from _measure(plan, step.frequency_hz, drive, settle)
         force, force_std = m.phasors[fi], np.nan_to_num(m.std[fi])
         decision = controller.next_drive(drive, force, force_std)
         accepted, reason = on_target(force, force_std, targets, settings, policy.uncertainty_factor)
@@ -275,60 +261,26 @@ def _one_step(
         if accepted:
             break
         out_of_budget = len(history) >= settings.max_iterations
-        errors = controller.record.errors
-        wandering = (
-            policy.restart_after > 0
-            and errors.size >= policy.restart_after
-            and errors[-1] > max(2.0 * errors.min(), RESTART_ERROR)
+        wandering = _wandering(controller.record.errors, policy)
+        stopped = decision.done or out_of_budget or wandering
+        window = (controller.record.errors.size, policy.restart_after)
+        probe = (
+            None if stopped or probed else _fold_probe(history, *window, fi, i1, targets, low_gain)
         )
-        probe = None
-        if not (decision.done or out_of_budget or wandering or probed):
-            probe = _fold_probe(
-                history, errors.size, policy.restart_after, fi, i1, targets, low_gain
-            )
-        if not (decision.done or out_of_budget or wandering or probe is not None):
+        if not (stopped or probe is not None):
             drive = decision.drive_v
             continue
-        run = controller.record
-        if not decision.done:
-            status = "max-iterations" if out_of_budget else "restart"
-            run = dataclasses.replace(run, status=status, reason=decision.reason)
+        run = _ended_run(controller.record, decision, out_of_budget)
         runs.append(run)
         if probe is not None:
             probed = True
-            yield Warn(
-                "fold",
-                f"force control {where}: the force stopped following the drive at "
-                f"{abs(drive[i1]):.4g} V (a turning point of the force-drive curve, the target "
-                f"beyond it); control starts again from {abs(probe[i1]):.4g} V",
-            )
+            yield _fold_warning(where, drive[i1], probe[i1])
             drive = controller.start_step(targets, low_gain, probe)
             continue
-        if (
-            not runs[:-1]
-            and run.diverged
-            and policy.on_divergence == "abort"
-            and float(np.min(run.errors)) > policy.divergence_abort_error
-        ):
-            raise RunFault(
-                "control-diverged",
-                f"force control diverged {where}: {run.reason}; check the drive chain "
-                "(amplifier gain, shaker, stinger, force-gauge polarity) before resuming",
-            )
+        _check_divergence(run, first=not runs[:-1], policy=policy, where=where)
         if out_of_budget or run.status == "drive-limit":
             break
-        # start again from the force per volt the latest measurement shows: near the fold of
-        # a nonlinear resonance the response jumps between branches and the gain learnt across
-        # the jump misleads. The new drive stays within the range applied in this step, widened
-        # by half (no wild extrapolation from a single point).
-        gain = run.final_gain.copy()
-        if drive[i1] != 0 and force[i1] != 0 and np.isfinite(force[i1]):
-            gain[i1, i1] = force[i1] / drive[i1]
-        applied = [abs(d[i1]) for d, _ in history]
-        v1 = targets[i1] / gain[i1, i1]
-        v1 *= float(np.clip(abs(v1), 0.5 * min(applied), 1.5 * max(applied))) / abs(v1)
-        restart_drive = drive.copy()
-        restart_drive[i1] = v1
+        gain, restart_drive = _restart(run, drive, force, history, targets, i1)
         try:
             drive = controller.start_step(targets, gain, restart_drive)
         except ValueError:  # a singular estimate: start from the loop-check shape instead
@@ -337,16 +289,25 @@ def _one_step(
         final = controller.record
         if not decision.converged:
             final = dataclasses.replace(final, status="converged", reason=reason)
-        control = _merge_runs([*runs, final])
+        runs.append(final)
+    return (yield from _record_step(plan, ctx, step, history, runs, targets, accepted, where))
+
+
+def _record_step(plan, ctx, step, history, runs, targets, accepted, where):
+    """Write the step from its chosen measurement: the accepted one (extended to the plan's
+    record blocks), else the best of all, flagged; returns (StepRecord, final gain estimate)."""
+    control = _merge_runs(runs)
+    if accepted:
         chosen = len(history) - 1
     else:
-        control = _merge_runs(runs)
         chosen = int(np.argmin(control.errors))
         yield Warn(
             "not-converged",
             f"force control {control.status} {where}: {control.reason}; the best of "
             f"{control.iterations} measurements is recorded, flagged as not converged",
         )
+    acq = plan.acquisition
+    fi = ctx.drive_force_index
     drive_used, m = history[chosen]
     if chosen == len(history) - 1 and acq.record_blocks > acq.average_blocks:
         more = yield Acquire(
@@ -358,9 +319,96 @@ def _one_step(
             extra_orders=plan.extra_orders,
         )
         m = combine_measurements(m, more)
+    record = _step_record(plan, step, m, fi, targets, drive_used, control, accepted)
+    t0 = m.first_index / ctx.sample_rate_hz
+    yield WriteStep(record, control, m.samples, t0, m.settled)
+    return record, control.final_gain
+
+
+def _measure(plan: SteppedSinePlan, frequency_hz: float, drive: np.ndarray, settle: int):
+    """Apply ``drive`` and measure (settled, averaged); returns the Measurement."""
+    acq = plan.acquisition
+    yield SetDrive(frequency_hz, drive, plan.excitation.orders, acq.ramp_s)
+    return (
+        yield Acquire(
+            settle_periods=settle,
+            blocks=acq.average_blocks,
+            block_periods=acq.block_periods,
+            max_settle_periods=acq.max_settle_periods,
+            settling_tolerance=acq.settling_tolerance,
+            drift_tolerance=acq.drift_tolerance,
+            keep_samples=acq.store_raw,
+            extra_orders=plan.extra_orders,
+        )
+    )
+
+
+def _fold_warning(where: str, stalled_v: complex, probe_v: complex) -> Warn:
+    return Warn(
+        "fold",
+        f"force control {where}: the force stopped following the drive at "
+        f"{abs(stalled_v):.4g} V (a turning point of the force-drive curve, the target "
+        f"beyond it); control starts again from {abs(probe_v):.4g} V",
+    )
+
+
+def _ended_run(run: StepControlRecord, decision, out_of_budget: bool) -> StepControlRecord:
+    """The record of a control run the step ends or starts again: as the controller ended it,
+    or stopped here for lack of iterations or to restart."""
+    if decision.done:
+        return run
+    status = "max-iterations" if out_of_budget else "restart"
+    return dataclasses.replace(run, status=status, reason=decision.reason)
+
+
+def _wandering(errors: np.ndarray, policy) -> bool:
+    """The control error has grown well past its best of this run: start again."""
+    return bool(
+        policy.restart_after > 0
+        and errors.size >= policy.restart_after
+        and errors[-1] > max(2.0 * errors.min(), RESTART_ERROR)
+    )
+
+
+def _check_divergence(run: StepControlRecord, *, first: bool, policy, where: str) -> None:
+    """Stop the run when the first control run of a step diverged and never came near."""
+    if (
+        first
+        and run.diverged
+        and policy.on_divergence == "abort"
+        and float(np.min(run.errors)) > policy.divergence_abort_error
+    ):
+        raise RunFault(
+            "control-diverged",
+            f"force control diverged {where}: {run.reason}; check the drive chain "
+            "(amplifier gain, shaker, stinger, force-gauge polarity) before resuming",
+        )
+
+
+def _restart(run, drive, force, history, targets, i1):
+    """The gain and drive to start a step's control again from.
+
+    The force per volt the latest measurement shows: near the fold of a nonlinear resonance
+    the response jumps between branches and the gain learnt across the jump misleads. The new
+    drive stays within the range applied in this step, widened by half (no wild extrapolation
+    from a single point).
+    """
+    gain = run.final_gain.copy()
+    if drive[i1] != 0 and force[i1] != 0 and np.isfinite(force[i1]):
+        gain[i1, i1] = force[i1] / drive[i1]
+    applied = [abs(d[i1]) for d, _ in history]
+    v1 = targets[i1] / gain[i1, i1]
+    v1 *= float(np.clip(abs(v1), 0.5 * min(applied), 1.5 * max(applied))) / abs(v1)
+    restart_drive = drive.copy()
+    restart_drive[i1] = v1
+    return gain, restart_drive
+
+
+def _step_record(plan, step, m, fi, targets, drive_used, control, accepted) -> StepRecord:
+    """The file's row of a step from its chosen measurement."""
     force = m.phasors[fi]
     t1 = abs(targets[plan.excitation.spec.fundamental_index])
-    record = StepRecord(
+    return StepRecord(
         plan_index=step.plan_index,
         level_index=step.level_index,
         sweep_direction=step.sweep_direction,
@@ -378,9 +426,6 @@ def _one_step(
         extra_force=None if m.extra is None else m.extra.phasors[fi].copy(),
         extra_force_std=None if m.extra is None else np.nan_to_num(m.extra.std[fi]).copy(),
     )
-    t0 = m.first_index / ctx.sample_rate_hz
-    yield WriteStep(record, control, m.samples, t0, m.settled)
-    return record, control.final_gain
 
 
 def _fold_probe(

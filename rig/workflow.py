@@ -80,6 +80,11 @@ def _stage(name: str, argv: list[str], log: list[dict], quiet: bool) -> dict:
     return out
 
 
+def _m(module: str, *args) -> list[str]:
+    """The arguments of ``python -m module args...`` (paths and numbers as text)."""
+    return ["-m", module, *(str(a) for a in args)]
+
+
 def run_workflow(
     out: str | Path,
     *,
@@ -109,26 +114,17 @@ def run_workflow(
     reference = None
     if backend == "sim":
         reference = out / TRUTH_FILE
-        _stage("reference values", ["-m", "rig", "reference", "--out", str(reference),
-                                    "--overwrite", *sim], log, quiet)  # fmt: skip
-    _stage(
-        "random test",
-        ["-m", "rig", "linear", str(linear_plan), "--backend", backend, "--out", str(lin_run),
-         "--overwrite", *rig_args],
-        log,
-        quiet,
-    )  # fmt: skip
+        argv = _m("rig", "reference", "--out", reference, "--overwrite", *sim)
+        _stage("reference values", argv, log, quiet)
+    rig_args = ["--backend", backend, "--overwrite", *rig_args]
+    _stage("random test", _m("rig", "linear", linear_plan, "--out", lin_run, *rig_args), log, quiet)
     lin, planning = _linear_stages(out, lin_run, log, quiet)
-    run = _stage(
-        "stepped-sine run",
-        ["-m", "rig", "run", str(plan), "--backend", backend, "--out", str(paper_run),
-         "--overwrite", *rig_args],
-        log,
-        quiet,
-    )  # fmt: skip
+    argv = _m("rig", "run", plan, "--out", paper_run, *rig_args)
+    run = _stage("stepped-sine run", argv, log, quiet)
     title = f"the {truth!r} simulated rig, seed {seed}" if backend == "sim" else "the rig"
-    return _nonlinear_stages(out, paper_run, lin, planning, run, starts, reference, title,
-                             log, quiet)  # fmt: skip
+    return _nonlinear_stages(
+        out, paper_run, lin, planning, run, starts, reference, title, log, quiet
+    )
 
 
 def analyse_runs(
@@ -151,40 +147,29 @@ def analyse_runs(
     out.mkdir(parents=True, exist_ok=True)
     log: list[dict] = []
     lin, planning = _linear_stages(out, Path(linear_run), log, quiet)
-    return _nonlinear_stages(out, Path(stepped_run), lin, planning, {}, starts, reference,
-                             title, log, quiet)  # fmt: skip
+    return _nonlinear_stages(
+        out, Path(stepped_run), lin, planning, {}, starts, reference, title, log, quiet
+    )
 
 
 def _linear_stages(out: Path, linear_run: Path, log: list, quiet: bool) -> tuple[dict, dict]:
-    lin = _stage(
-        "linear calibration",
-        ["-m", "analysis", "calibrate-linear", str(linear_run), "--out", str(out / "linear")],
-        log,
-        quiet,
-    )
-    planning = _stage(
-        "pretest planning",
-        ["-m", "analysis", "plan", "--model", str(out / "linear" / "calibrated_model.toml"),
-         "--top", "5"],
-        log,
-        quiet,
-    )  # fmt: skip
+    argv = _m("analysis", "calibrate-linear", linear_run, "--out", out / "linear")
+    lin = _stage("linear calibration", argv, log, quiet)
+    argv = _m("analysis", "plan", "--model", out / "linear" / "calibrated_model.toml", "--top", 5)
+    planning = _stage("pretest planning", argv, log, quiet)
     (out / "planning.json").write_text(json.dumps(planning, indent=1))
     return lin, planning
 
 
-def _nonlinear_stages(out, stepped_run, lin, planning, run, starts, reference, title, log,
-                      quiet) -> dict:  # fmt: skip
+def _nonlinear_stages(
+    out, stepped_run, lin, planning, run, starts, reference, title, log, quiet
+) -> dict:
     cal_dir = out / "nonlinear"
-    cal = _stage(
-        "nonlinear calibration",
-        ["-m", "analysis", "calibrate", str(stepped_run),
-         "--model", str(out / "linear" / "calibrated_model.toml"),
-         "--linear-result", str(out / "linear" / "linear_calibration.json"),
-         "--out", str(cal_dir), "--starts", str(starts)],
-        log,
-        quiet,
-    )  # fmt: skip
+    linear = out / "linear"
+    model = ["--model", linear / "calibrated_model.toml"]
+    model += ["--linear-result", linear / "linear_calibration.json"]
+    argv = _m("analysis", "calibrate", stepped_run, *model, "--out", cal_dir, "--starts", starts)
+    cal = _stage("nonlinear calibration", argv, log, quiet)
     result = str(cal_dir / "calibration.json")
     val = _stage("validation", ["-m", "analysis", "validate", "--result", result], log, quiet)
     ref = [] if reference is None else ["--reference", str(reference)]
@@ -234,8 +219,10 @@ def _reference_table(out: Path, reference: str | Path | None) -> dict:
         return {}
     ref = load_reference(reference)
     table = {}
-    for stage, path in (("linear", out / "linear" / "linear_calibration.json"),
-                        ("nonlinear", out / "nonlinear" / "calibration.json")):  # fmt: skip
+    for stage, path in (
+        ("linear", out / "linear" / "linear_calibration.json"),
+        ("nonlinear", out / "nonlinear" / "calibration.json"),
+    ):
         doc = json.loads(path.read_text())
         for row in parameter_rows(doc, {}, ref):
             f = row.factor or 1.0
@@ -247,7 +234,7 @@ def _reference_table(out: Path, reference: str | Path | None) -> dict:
                 "interval_95": [
                     None if row.low is None else row.low / f,
                     None if row.high is None else row.high / f,
-                ],  # fmt: skip
+                ],
                 "reference": None if row.reference is None else row.reference / f,
                 "error_rel": None if row.error_pct is None else row.error_pct / 100,
                 "z": row.z,
@@ -273,72 +260,111 @@ def _summary_markdown(s: dict, title: str, reference: str | Path | None, out: Pa
     def rel(text: str) -> str:  # paths as seen from the summary's folder
         return str(text).replace(f"{Path(out).resolve()}/", "").replace(f"{out}/", "")
 
-    v = s["verdict"]
+    table = _ParameterTable(s.get("comparison") or {})
     lines = [f"# The paper's workflow on {title}", "", "## Verdict", ""]
-    if v["misfit"]:
+    lines += _verdict_lines(s)
+    lines += _linear_lines(s["linear"], table)
+    if table.with_truth:
+        inside = [
+            r["inside_95"] for r in table.comparison.values() if r.get("inside_95") is not None
+        ]
         lines += [
+            "",
+            f"{sum(inside)} of {len(inside)} truth values lie inside their stated 95 % "
+            f"interval ({rel(reference)}: the simulated rig's truth, never read by the "
+            "calibration).",
+        ]
+    lines += _planning_lines(s["planning"])
+    if s["run"]:
+        run = json.dumps(s["run"], indent=1)[:1500]
+        lines += ["", "## Stepped-sine run", "", "```", run, "```"]
+    lines += _nonlinear_lines(s, table, rel)
+    lines += _crossval_lines(s.get("crossval") or {})
+    lines += _validation_lines(s["validation"])
+    total = sum(st["seconds"] for st in s["stages"])
+    lines.append(
+        f"Total {total:.0f} s: "
+        + ", ".join(f"{st['stage']} {st['seconds']:.0f} s" for st in s["stages"])
+    )
+    return "\n".join(lines)
+
+
+def _verdict_lines(s: dict) -> list[str]:
+    v = s["verdict"]
+    if v["misfit"]:
+        return [
             "**The model misfits its data: the stated intervals are not to be trusted.** "
             "The model lacks something the structure does; `python -m analysis diagnose` "
             "looks for what:",
             "",
             *(f"- {why}" for why in v["reasons"]),
         ]
-    else:
-        cal, val = s["calibration"], s["validation"]
-        lines.append(
-            f"The model fits its data within {v['adequate_rms']:g} x the noise (RMS residual over "
-            f"the noise: calibration {cal['chi2_per_dof'] ** 0.5:.3g}, validation at "
-            f"{val['level_n']:g} N {val['chi2_per_dof'] ** 0.5:.3g}; no cross-validation fold "
-            "misfits): the "
-            "stated intervals carry the noise, the misfit and the uncertainty of the values "
-            "the calibration holds (linear parameters, modal damping)."
-        )
-    comp = s.get("comparison") or {}
-    ref_cols = bool(comp)
-    head = "| parameter | status | calibrated | 95 % interval |"
-    rule = "|---|---|---|---|"
-    if ref_cols:
-        head += " truth | error | error / sigma |"
-        rule += "---|---|---|"
+    cal, val = s["calibration"], s["validation"]
+    return [
+        f"The model fits its data within {v['adequate_rms']:g} x the noise (RMS residual over "
+        f"the noise: calibration {cal['chi2_per_dof'] ** 0.5:.3g}, validation at "
+        f"{val['level_n']:g} N {val['chi2_per_dof'] ** 0.5:.3g}; no cross-validation fold "
+        "misfits): the "
+        "stated intervals carry the noise, the misfit and the uncertainty of the values "
+        "the calibration holds (linear parameters, modal damping)."
+    ]
 
-    def table(stage: str, params: dict, std: dict, status: dict, paper: dict) -> list[str]:
+
+class _ParameterTable:
+    """The parameter tables of the summary: value, interval, and with a truth file the truth,
+    the error and the error over sigma; the paper's value last."""
+
+    def __init__(self, comparison: dict) -> None:
+        self.comparison = comparison
+        self.with_truth = bool(comparison)
+
+    def lines(self, params: dict, std: dict, status: dict, paper: dict) -> list[str]:
+        head = "| parameter | status | calibrated | 95 % interval |"
+        rule = "|---|---|---|---|"
+        if self.with_truth:
+            head += " truth | error | error / sigma |"
+            rule += "---|---|---|"
         out = [head + " paper |", rule + "---|"]
         for k, value in params.items():
-            sd = std.get(k)
-            row = comp.get(k, {})
-            lo, hi = row.get("interval_95", [None, None]) if row else (None, None)
-            if lo is None and sd is not None:
-                lo, hi = value - 1.96 * sd, value + 1.96 * sd
-            cells = [k, status.get(k, "fitted"), _fmt(value), f"{_fmt(lo)} .. {_fmt(hi)}"]
-            if ref_cols:
-                err = row.get("error_rel")
-                z = row.get("z")
-                cells += [_fmt(row.get("reference")),
-                          "" if err is None else f"{100 * err:+.2f} %",
-                          "" if z is None else f"{z:+.2f}"]  # fmt: skip
+            cells = self._cells(k, value, std.get(k), status.get(k, "fitted"))
             cells.append(_fmt(paper.get(k)))
             out.append("| " + " | ".join(cells) + " |")
         return out
 
-    lin = s["linear"]
-    lines += ["", "## Linear calibration (Table 2)", ""]
-    lines += table("linear", lin.get("parameters", {}), lin.get("std", {}),
-                   lin.get("status", {}), PAPER_LINEAR)  # fmt: skip
+    def _cells(self, k: str, value: float, sd: float | None, status: str) -> list[str]:
+        row = self.comparison.get(k, {})
+        lo, hi = row.get("interval_95", [None, None]) if row else (None, None)
+        if lo is None and sd is not None:
+            lo, hi = value - 1.96 * sd, value + 1.96 * sd
+        cells = [k, status, _fmt(value), f"{_fmt(lo)} .. {_fmt(hi)}"]
+        if self.with_truth:
+            err, z = row.get("error_rel"), row.get("z")
+            cells += [
+                _fmt(row.get("reference")),
+                "" if err is None else f"{100 * err:+.2f} %",
+                "" if z is None else f"{z:+.2f}",
+            ]
+        return cells
+
+
+def _linear_lines(lin: dict, table: _ParameterTable) -> list[str]:
+    lines = ["", "## Linear calibration (Table 2)", ""]
+    lines += table.lines(
+        lin.get("parameters", {}), lin.get("std", {}), lin.get("status", {}), PAPER_LINEAR
+    )
     held = lin.get("held", {})
     if held:
         lines += ["", "Not determined by the random test, held at the prior:", ""]
         lines += [f"- **{k}**: {why}" for k, why in held.items()]
     loose = {k: r for k, r in lin.get("undetermined", {}).items() if k not in held}
     if loose:
-        lines += ["", "Fitted, but uncertain (relative 1 sigma above 5 %): "
-                  + ", ".join(f"{k} ({100 * r:.3g} %)" for k, r in loose.items())]  # fmt: skip
-    if ref_cols:
-        inside = [r["inside_95"] for r in comp.values() if r.get("inside_95") is not None]
-        lines += ["", f"{sum(inside)} of {len(inside)} truth values lie inside their stated 95 % "
-                  f"interval ({rel(reference)}: the simulated rig's truth, never read by the "
-                  "calibration)."]  # fmt: skip
-    top = s["planning"].get("top", [])
-    lines += [
+        rels = ", ".join(f"{k} ({100 * r:.3g} %)" for k, r in loose.items())
+        lines += ["", "Fitted, but uncertain (relative 1 sigma above 5 %): " + rels]
+    return lines
+
+
+def _planning_lines(planning: dict) -> list[str]:
+    lines = [
         "",
         "## Pretest planning (Table 4)",
         "",
@@ -347,48 +373,66 @@ def _summary_markdown(s: dict, title: str, reference: str | Path | None, out: Pa
         "| rank | actuator | levels [N] | range [Hz] | sensors | det(FIM) |",
         "|---|---|---|---|---|---|",
     ]
-    for t in top[:5]:
+    for t in planning.get("top", [])[:5]:
         lines.append(
             f"| {t.get('rank')} | {t.get('actuator')} | {t.get('levels_n')} | "
             f"{t.get('range_hz')} | {t.get('sensors')} | {t.get('det', 0):.3g} |"
         )
-    if s["run"]:
-        lines += ["", "## Stepped-sine run", "", "```", json.dumps(s["run"], indent=1)[:1500],
-                  "```"]  # fmt: skip
+    return lines
+
+
+def _nonlinear_lines(s: dict, table: _ParameterTable, rel) -> list[str]:
     cal = s["calibration"]
-    lines += ["", "## Nonlinear calibration (Table 5)", ""]
-    lines += table("nonlinear", cal["parameters"], cal["std"], {}, PAPER_NONLINEAR)
+    lines = ["", "## Nonlinear calibration (Table 5)", ""]
+    lines += table.lines(cal["parameters"], cal["std"], {}, PAPER_NONLINEAR)
     refined = cal.get("held_refined") or {}
     if refined:
-        truth = {k: row.get("reference") for k, row in comp.items()}
+        truth = {k: row.get("reference") for k, row in table.comparison.items()}
         truth |= {f"zeta_{k}": v for k, v in (s.get("reference_damping") or {}).items()}
-        lines += ["", "Refined jointly with the values it holds (the linear test's posterior as "
-                  "the prior; the calibrated model file carries these):", "",
-                  "| value | linear test | after the stepped sine | 1 sigma |"
-                  + (" truth |" if ref_cols else ""),
-                  "|---|---|---|---|" + ("---|" if ref_cols else "")]  # fmt: skip
+        extra_head, extra_rule = (" truth |", "---|") if table.with_truth else ("", "")
+        lines += [
+            "",
+            "Refined jointly with the values it holds (the linear test's posterior as "
+            "the prior; the calibrated model file carries these):",
+            "",
+            "| value | linear test | after the stepped sine | 1 sigma |" + extra_head,
+            "|---|---|---|---|" + extra_rule,
+        ]
         for k, r in refined.items():
             row = f"| {k} | {_fmt(r.get('start'))} | {_fmt(r['value'])} | {_fmt(r['std'], 3)} |"
-            if ref_cols:
+            if table.with_truth:
                 row += f" {_fmt(truth.get(k))} |"
             lines.append(row)
     noise = ", ".join(f"{k} {_fmt(x, 3)}" for k, x in cal.get("std_noise", {}).items())
     held_from = rel(cal.get("held") or "nowhere (held as exact)")
-    lines += ["", f"chi2/dof {cal['chi2_per_dof']:.3f}; the held values' uncertainty from "
-              f"{held_from}; noise-only 1 sigma: {noise}"]  # fmt: skip
-    cv = s.get("crossval") or {}
-    if cv:
-        lines += ["", "## Cross-validation", "",
-                  "| parameter | folds' std / noise-only (FIM^-1) std |", "|---|---|"]  # fmt: skip
-        for n, r in zip(cv["names"], cv["std_ratio"], strict=True):
-            lines.append(f"| {n} | {r:.2f} |")
-        if cv.get("stuck"):
-            lines += ["", f"{len(cv['stuck'])} fold(s) could not leave the calibrated optimum; "
-                      "their scatter understates the uncertainty."]  # fmt: skip
-        if cv.get("notes"):
-            lines += ["", *(f"- {note}" for note in cv["notes"])]
-    val = s["validation"]
     lines += [
+        "",
+        f"chi2/dof {cal['chi2_per_dof']:.3f}; the held values' uncertainty from "
+        f"{held_from}; noise-only 1 sigma: {noise}",
+    ]
+    return lines
+
+
+def _crossval_lines(cv: dict) -> list[str]:
+    if not cv:
+        return []
+    lines = ["", "## Cross-validation", ""]
+    lines += ["| parameter | folds' std / noise-only (FIM^-1) std |", "|---|---|"]
+    for n, r in zip(cv["names"], cv["std_ratio"], strict=True):
+        lines.append(f"| {n} | {r:.2f} |")
+    if cv.get("stuck"):
+        lines += [
+            "",
+            f"{len(cv['stuck'])} fold(s) could not leave the calibrated optimum; "
+            "their scatter understates the uncertainty.",
+        ]
+    if cv.get("notes"):
+        lines += ["", *(f"- {note}" for note in cv["notes"])]
+    return lines
+
+
+def _validation_lines(val: dict) -> list[str]:
+    return [
         "",
         "## Validation",
         "",
@@ -399,9 +443,3 @@ def _summary_markdown(s: dict, title: str, reference: str | Path | None, out: Pa
         "Figures and tables: `nonlinear/report.html`.",
         "",
     ]
-    total = sum(st["seconds"] for st in s["stages"])
-    lines.append(
-        f"Total {total:.0f} s: "
-        + ", ".join(f"{st['stage']} {st['seconds']:.0f} s" for st in s["stages"])
-    )
-    return "\n".join(lines)

@@ -98,30 +98,9 @@ def least_squares_lm(
         callback(history[-1])
     message, success, it = "maximum iterations reached", False, 0
     for it in range(1, max_iterations + 1):
-        A = J.T @ J
-        g = J.T @ r
-        d = np.diag(A).copy()
-        d[d <= 0] = 1.0
-        accepted, factor, step = False, 1.0, None
-        for _ in range(12):
-            if damped or step is None:
-                M = A + lam * np.diag(d)
-                try:
-                    step = np.linalg.solve(M, -g)
-                except np.linalg.LinAlgError:
-                    step = -np.linalg.lstsq(M, g, rcond=None)[0]
-            x_new = np.clip(x + factor * step, lo, hi)
-            r_new, _ = fun(x_new, False)
-            nfev += 1
-            cost_new = 0.5 * float(r_new @ r_new) if np.all(np.isfinite(r_new)) else np.inf
-            if cost_new < cost:
-                accepted = True
-                break
-            if damped:
-                lam = max(lam * 5.0, 1e-6)
-            else:
-                factor *= 0.5  # undamped: the Gauss-Newton direction, shortened
-        if not accepted:
+        x_new, cost_new, lam, tries = _trial_step(fun, x, r, J, cost, lam, damped, lo, hi)
+        nfev += tries
+        if x_new is None:
             message, success = "no step reduces the cost (at a minimum within tolerance)", True
             break
         step_norm = float(np.linalg.norm(x_new - x))
@@ -150,3 +129,33 @@ def least_squares_lm(
     except np.linalg.LinAlgError:
         cov = np.linalg.pinv(JTJ)
     return LeastSquaresResult(x, cost, r, J, cov, nfev, njev, it, success, message, history)
+
+
+def _trial_step(fun, x, r, J, cost, lam, damped, lo, hi):
+    """Up to 12 trials of a step from ``x`` until one lowers the cost: the damping raised
+    5-fold after each failure (LM), or the Gauss-Newton step halved (undamped).
+
+    Returns ``(x_new, cost_new, lam, evaluations)``; ``x_new`` None when no trial lowered it.
+    """
+    A = J.T @ J
+    g = J.T @ r
+    d = np.diag(A).copy()
+    d[d <= 0] = 1.0
+    factor, step = 1.0, None
+    for tries in range(1, 13):
+        if damped or step is None:
+            M = A + lam * np.diag(d)
+            try:
+                step = np.linalg.solve(M, -g)
+            except np.linalg.LinAlgError:
+                step = -np.linalg.lstsq(M, g, rcond=None)[0]
+        x_new = np.clip(x + factor * step, lo, hi)
+        r_new, _ = fun(x_new, False)
+        cost_new = 0.5 * float(r_new @ r_new) if np.all(np.isfinite(r_new)) else np.inf
+        if cost_new < cost:
+            return x_new, cost_new, lam, tries
+        if damped:
+            lam = max(lam * 5.0, 1e-6)
+        else:
+            factor *= 0.5  # undamped: the Gauss-Newton direction, shortened
+    return None, np.inf, lam, 12

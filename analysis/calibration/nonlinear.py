@@ -147,9 +147,12 @@ def make_predictor(
     """The predictor a calibration with ``settings`` uses (see ``match_branches``)."""
     kind = BranchMatchedPredictor if settings.match_branches else SteppedSinePredictor
     return kind(
-        model, data, channels=settings.channels, n_harmonics=settings.n_harmonics,
+        model,
+        data,
+        channels=settings.channels,
+        n_harmonics=settings.n_harmonics,
         n_time=settings.n_time,
-    )  # fmt: skip
+    )
 
 
 def split_levels(data: SteppedSineData, settings: CalibrationSettings):
@@ -272,9 +275,11 @@ class NonlinearCalibration:
         folds the model misfits named among :attr:`misfit`."""
         self.fold_ratio = np.asarray(std_ratio, dtype=float)
         self.noise_scale = noise_scale(self.chi2_per_dof, self.fold_ratio)
-        self.fold_misfit = [
-            f"the cross-validation finds a systematic misfit in {', '.join(misfit_folds[:3])}"
-        ] if misfit_folds else []  # fmt: skip
+        self.fold_misfit = (
+            [f"the cross-validation finds a systematic misfit in {', '.join(misfit_folds[:3])}"]
+            if misfit_folds
+            else []
+        )
         self.combine()
 
     def contributions(self) -> dict[str, dict[str, float]]:
@@ -286,8 +291,10 @@ class NonlinearCalibration:
         k = np.asarray(self.noise_scale, dtype=float) * np.ones(len(names))
         out: dict[str, dict[str, float]] = {}
         for i, n in enumerate(names):
-            row = {"noise": float(sd_noise[i]),
-                   "misfit": float(sd_noise[i] * np.sqrt(max(k[i] ** 2 - 1, 0.0)))}  # fmt: skip
+            row = {
+                "noise": float(sd_noise[i]),
+                "misfit": float(sd_noise[i] * np.sqrt(max(k[i] ** 2 - 1, 0.0))),
+            }
             if self.cov_joint is not None:  # jointly refined: what is left of them together
                 row["held values"] = float(np.sqrt(max(self.held_cov[i, i], 0.0)))
             elif self.held is not None and self.held_gain is not None:
@@ -326,7 +333,7 @@ class NonlinearCalibration:
             "interval_95": {
                 n: [self.parameters[n] - 1.96 * std[n], self.parameters[n] + 1.96 * std[n]]
                 for n in names
-            },  # fmt: skip
+            },
             "cov": self.cov.tolist(),
             "correlation": self.correlation.tolist(),
             "std_noise": self.std_noise,
@@ -412,9 +419,11 @@ class ObjectiveSpec:
         model = Model.from_toml_text(self.model_toml, source="<calibration model>")
         data = read_measurement(self.data_path)
         settings = CalibrationSettings(
-            channels=self.channels, n_harmonics=self.n_harmonics, n_time=self.n_time,
+            channels=self.channels,
+            n_harmonics=self.n_harmonics,
+            n_time=self.n_time,
             match_branches=self.match_branches,
-        )  # fmt: skip
+        )
         pred = make_predictor(model, data, settings)
         return FRFObjective(
             pred, ParameterSpace.from_model(model, self.names), self.mask, self.weighting
@@ -471,6 +480,25 @@ def evaluate_costs(
             done += futures[f]
             on_done(done, total)
     return np.concatenate([f.result() for f in futures])
+
+
+def _best_lm(objective, starts, bounds, st: CalibrationSettings, progress):
+    """Levenberg-Marquardt from each of ``starts`` (the best Latin hypercube points); the
+    result of least cost."""
+    best: LeastSquaresResult | None = None
+    for theta in starts:
+        res = least_squares_lm(
+            objective,
+            theta,
+            bounds=bounds,
+            max_iterations=st.max_iterations,
+            callback=(lambda h: progress("lm", h)) if progress else None,
+        )
+        if best is None or res.cost < best.cost:
+            best = res
+    if progress:
+        progress("lm_done", {"iteration": best.nit, "cost": float(best.cost)})
+    return best
 
 
 def calibrate_nonlinear(
@@ -535,20 +563,8 @@ def calibrate_nonlinear(
     if progress:
         progress("lhs", {"n": len(costs), "best_cost": float(costs[order[0]]), "seconds": lhs_s})
     t0 = time.perf_counter()
-    best: LeastSquaresResult | None = None
-    for k in order[: st.n_lm_starts]:
-        res = least_squares_lm(
-            objective,
-            thetas[k],
-            bounds=(lo_t, hi_t),
-            max_iterations=st.max_iterations,
-            callback=(lambda h: progress("lm", h)) if progress else None,
-        )
-        if best is None or res.cost < best.cost:
-            best = res
+    best = _best_lm(objective, thetas[order[: st.n_lm_starts]], (lo_t, hi_t), st, progress)
     lm_s = time.perf_counter() - t0
-    if progress:
-        progress("lm_done", {"iteration": best.nit, "cost": float(best.cost)})
     m, n = best.fun.size, space.size
     dof = max(m - n, 1)
     chi2 = 2 * best.cost / dof
@@ -635,9 +651,12 @@ def _joint_refinement(result, model, data, objective, progress) -> None:
     Db = sp.dp_dtheta(x0)[k:]
     prior = _GaussianPrior(obj, k, x0[k:], held.cov / np.outer(Db, Db))
     res = least_squares_lm(
-        prior, x0, bounds=(lo, hi), max_iterations=st.max_iterations,
+        prior,
+        x0,
+        bounds=(lo, hi),
+        max_iterations=st.max_iterations,
         callback=(lambda h: progress("joint", h)) if progress else None,
-    )  # fmt: skip
+    )
     if progress:
         progress("joint_done", {"iteration": res.nit, "cost": float(res.cost)})
     nb = len(held.names)
@@ -658,8 +677,13 @@ def _joint_refinement(result, model, data, objective, progress) -> None:
     result.held_gain = -np.linalg.lstsq(J[:, :k] / D[:k], J[:, k:] / D[k:], rcond=None)[0]
     result.chi2_per_dof = float(2 * data_cost / max(m - k, 1))
     result.lm = dataclasses.replace(
-        result.lm, x=res.x[:k], cost=data_cost, nit=result.lm.nit + res.nit,
-        history=[*result.lm.history, *({**h, "x": list(np.asarray(h["x"])[:k]), "joint": True}
-                                       for h in res.history)],
-    )  # fmt: skip
+        result.lm,
+        x=res.x[:k],
+        cost=data_cost,
+        nit=result.lm.nit + res.nit,
+        history=[
+            *result.lm.history,
+            *({**h, "x": list(np.asarray(h["x"])[:k]), "joint": True} for h in res.history),
+        ],
+    )
     log.info("joint refinement: %s (chi2/dof %.3g)", values, result.chi2_per_dof)
