@@ -291,6 +291,8 @@ def cmd_export_uff(args) -> int:
 def cmd_plans(args) -> int:
     from rig.plans import builtin_plans, describe_plan, load_plan
 
+    if getattr(args, "plans_command", None) == "show":
+        return _show_plan(args)
     rows = {}
     for name, path in sorted(builtin_plans().items()):
         plan = load_plan(name)
@@ -300,6 +302,43 @@ def cmd_plans(args) -> int:
     else:
         for name, row in rows.items():
             print(f"{name:8s} {row['summary']}")
+    return EXIT_OK
+
+
+def _show_plan(args) -> int:
+    """``rig plans show PLAN``: the plan's steps and the time they take, from a dry run."""
+    from analysis.progress import format_duration
+    from rig.dry_run import dry_run
+    from rig.plans import SteppedSinePlan, describe_plan, load_plan
+    from rig.setup import load_setup
+
+    plan = load_plan(args.plan)
+    setup = load_setup(args.setup) if args.setup else None
+    run = dry_run(plan, setup)
+    if args.json:
+        out = run.to_json() | {"summary": describe_plan(plan)}
+        if isinstance(plan, SteppedSinePlan):
+            keys = ("plan_index", "level_n", "frequency_hz", "sweep_direction")
+            out["steps"] = [
+                {k: getattr(step, k) for k in keys} | {"seconds_at_least": t}
+                for step, t in zip(plan.steps(), run.step_seconds, strict=True)
+            ]
+        print(json.dumps(out))
+        return EXIT_OK
+    print(f"{plan.name}: {describe_plan(plan)}")
+    took = format_duration(run.seconds)
+    if not isinstance(plan, SteppedSinePlan):
+        print(f"{run.n_measurements} records of {run.iteration_s:g} s: acquisition {took}")
+        return EXIT_OK
+    for level in plan.levels_n:
+        for sign, freqs in plan.frequencies.sweeps():
+            way = "up" if sign > 0 else "down"
+            print(f"  {level:g} N, {way}: {freqs.size} steps, {freqs[0]:g} .. {freqs[-1]:g} Hz")
+    print(
+        f"{run.n_measurements} measurements; acquisition at least {took} (force control on "
+        f"target at once); each further control iteration of a step adds about "
+        f"{run.iteration_s:.2g} s"
+    )
     return EXIT_OK
 
 
@@ -366,6 +405,13 @@ def add_run_commands(sub) -> None:
     sp.add_argument("--json", action="store_true", help="print one JSON object")
     sp.set_defaults(func=cmd_export_uff)
 
-    sp = sub.add_parser("plans", help="list the built-in plans")
+    sp = sub.add_parser("plans", help="list the built-in plans; 'plans show PLAN': its steps")
     sp.add_argument("--json", action="store_true", help="print one JSON object")
     sp.set_defaults(func=cmd_plans)
+    show = sp.add_subparsers(dest="plans_command").add_parser(
+        "show", help="a plan's steps and the time they take (a dry run on a model plant)"
+    )
+    show.add_argument("plan", help="built-in plan name or plan file")
+    show.add_argument("--setup", help="lab setup: built-in name or TOML file (default: the plan's)")
+    show.add_argument("--json", action="store_true", help="print one JSON object")
+    show.set_defaults(func=cmd_plans)

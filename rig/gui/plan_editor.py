@@ -145,4 +145,13 @@ class PlanEditor(SettingsEditor):
         return plan_from_dict({**doc, "kind": self.kind}, self.source)
 
     def describe(self, value: Plan) -> str:
-        return describe_plan(value)
+        """The plan in a line, with the acquisition time a dry run gives (rig.dry_run)."""
+        from analysis.progress import format_duration
+        from rig.dry_run import dry_run
+
+        try:
+            seconds = dry_run(value).seconds
+        except Exception as exc:  # noqa: BLE001 - the summary line must not stop the editor
+            return f"{describe_plan(value)}; the dry run failed: {exc}"
+        least = "at least " if isinstance(value, SteppedSinePlan) else ""
+        return f"{describe_plan(value)}; acquisition {least}{format_duration(seconds)}"

@@ -18,13 +18,14 @@ from rig.commands import (
     WriteRandom,
     WriteStep,
 )
+from rig.dry_run import ModelPlant
 from rig.events import ControlIteration, PretestFinished
 from rig.faults import RunFault
 from rig.plans import builtin_plans, describe_plan, load_plan, plan_from_dict
 from rig.run_random import random_procedure
 from rig.run_stepped import stepped_sine_procedure
 from rig.tomlconfig import ConfigError
-from tests.rig.rig_helpers import RecordingRig, context, reduced_plan, setup_at
+from tests.rig.rig_helpers import context, reduced_plan, setup_at
 
 
 def test_builtin_plans():
@@ -166,7 +167,7 @@ def _smooth_gain(f, orders):
 def test_stepped_procedure_commands_on_a_model_plant():
     setup = setup_at()
     plan = reduced_plan(levels_n=(2.0, 6.0), ranges=((22.0, 24.0, 0.5),))
-    rig = RecordingRig(context(setup, sample_rate_hz=5120.0), _smooth_gain)
+    rig = ModelPlant(context(setup, sample_rate_hz=5120.0), _smooth_gain)
     commands = rig.run(stepped_sine_procedure(plan))
     kinds = [type(c).__name__ for c in commands]
     # pretest first: 0 V noise floor, then the low-level loop check at every order
@@ -198,17 +199,17 @@ def test_stepped_procedure_commands_on_a_model_plant():
 def test_completed_steps_are_skipped():
     setup = setup_at()
     plan = reduced_plan(levels_n=(2.0,), ranges=((21.0, 25.0, 1.0),))
-    rig = RecordingRig(context(setup, sample_rate_hz=5120.0), _smooth_gain)
+    rig = ModelPlant(context(setup, sample_rate_hz=5120.0), _smooth_gain)
     rig.run(stepped_sine_procedure(plan, completed={0, 1, 3}))
     assert [w.record.plan_index for w in rig.steps] == [2, 4]
-    rig = RecordingRig(context(setup, sample_rate_hz=5120.0), _smooth_gain)
+    rig = ModelPlant(context(setup, sample_rate_hz=5120.0), _smooth_gain)
     assert rig.run(stepped_sine_procedure(plan, completed=range(5))) == []
 
 
 def test_controller_learns_the_coupling_of_the_orders():
     setup = setup_at()
     plan = reduced_plan(levels_n=(4.0,), ranges=((21.0, 23.0, 1.0),))
-    rig = RecordingRig(context(setup, sample_rate_hz=5120.0), _smooth_gain, coupling=0.05)
+    rig = ModelPlant(context(setup, sample_rate_hz=5120.0), _smooth_gain, coupling=0.05)
     rig.run(stepped_sine_procedure(plan))
     for write in rig.steps:
         assert write.record.control_converged
@@ -225,7 +226,7 @@ def test_wrong_polarity_makes_the_controller_diverge():
         pretest=dataclasses.replace(plan.pretest, enabled=False),
         control=dataclasses.replace(plan.control, settings=settings),
     )
-    rig = RecordingRig(context(setup, sample_rate_hz=5120.0), _smooth_gain)
+    rig = ModelPlant(context(setup, sample_rate_hz=5120.0), _smooth_gain)
     wrong = -_smooth_gain(21.0, plan.excitation.orders)
     with pytest.raises(RunFault) as err:
         rig.run(stepped_sine_procedure(plan, initial_gain=wrong))
@@ -242,7 +243,7 @@ def test_random_procedure_commands():
         acquisition=dataclasses.replace(plan.acquisition, average_records=3),
         pretest=dataclasses.replace(plan.pretest, noise_s=0.5),
     )
-    rig = RecordingRig(context(setup, plan.points, 2560.0), _smooth_gain)
+    rig = ModelPlant(context(setup, plan.points, 2560.0), _smooth_gain)
     commands = rig.run(random_procedure(plan))
     waves = [c for c in commands if isinstance(c, SetWaveform)]
     records = [c for c in commands if isinstance(c, AcquireRecords)]
@@ -267,7 +268,7 @@ def test_random_procedure_commands():
 def test_setdrive_commands_respect_the_orders():
     setup = setup_at()
     plan = reduced_plan(levels_n=(2.0,), ranges=((30.0, 30.0, 1.0),))
-    rig = RecordingRig(context(setup, sample_rate_hz=5120.0), _smooth_gain)
+    rig = ModelPlant(context(setup, sample_rate_hz=5120.0), _smooth_gain)
     commands = rig.run(stepped_sine_procedure(plan))
     drives = [c for c in commands if isinstance(c, SetDrive)]
     assert all(d.orders == plan.excitation.orders and d.drive_v.shape == (3,) for d in drives)
@@ -292,7 +293,7 @@ class _FoldCurve:
         from scipy.interpolate import PchipInterpolator
 
         self.curve = PchipInterpolator(self.a, self.f)
-        self.rig: RecordingRig | None = None
+        self.rig: ModelPlant | None = None
 
     def __call__(self, f, orders):
         g = _smooth_gain(f, orders)
@@ -310,7 +311,7 @@ def _fold_step(level_n: float, start_v: float, restart_after: int = 4):
         plan, pretest=dataclasses.replace(plan.pretest, enabled=False), control=control
     )
     curve = _FoldCurve()
-    rig = RecordingRig(context(setup_at(), sample_rate_hz=5120.0), curve)
+    rig = ModelPlant(context(setup_at(), sample_rate_hz=5120.0), curve)
     curve.rig = rig
     gain = _smooth_gain(22.0, plan.excitation.orders)
     gain[0] = level_n / start_v * gain[0] / abs(gain[0])
@@ -338,3 +339,43 @@ def test_a_target_above_the_peak_is_found_beyond_the_dip():
     assert 0.2 < abs(record.drive[0]) < 0.23 and abs(abs(record.force[0]) - 6.0) <= 0.06
     record, folds = _fold_step(6.0, 0.09, restart_after=0)
     assert not record.control_converged and not folds
+
+
+# ------------------------------------------------------------------------ dry run
+
+
+def test_dry_run_counts_the_time_the_measurements_take():
+    from rig.dry_run import dry_run
+
+    base = reduced_plan(levels_n=(2.0,), ranges=((25.0, 25.0, 1.0),))
+    acq = base.acquisition
+    run = dry_run(base)
+    assert run.n_steps == 1 and len(run.step_seconds) == 1
+    # one step at 25 Hz on a linear plant: on target at once, then the record blocks; its
+    # time is ramp + (settle + average blocks) periods + the extra record blocks, in 1/25 s
+    periods = acq.settle_periods + acq.record_blocks * acq.block_periods
+    assert run.step_seconds[0] == pytest.approx(acq.ramp_s + periods / 25.0, rel=2e-3)
+    # 8 more averaged blocks per measurement add 8 periods to every measurement
+    blocks = {"average_blocks": acq.average_blocks + 8, "record_blocks": acq.record_blocks + 8}
+    more = dataclasses.replace(acq, **blocks)
+    run2 = dry_run(dataclasses.replace(base, acquisition=more))
+    assert run2.n_measurements == run.n_measurements
+    assert run2.step_seconds[0] - run.step_seconds[0] == pytest.approx(8 / 25.0, rel=2e-3)
+    assert run2.seconds > run.seconds
+
+
+def test_plans_show_lists_the_steps_and_the_time(capsys):
+    from rig.cli import main
+
+    assert main(["plans", "show", "quick", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    plan = load_plan("quick")
+    assert out["n_steps"] == plan.n_steps == len(out["steps"])
+    assert [s["frequency_hz"] for s in out["steps"]] == [s.frequency_hz for s in plan.steps()]
+    steps_s = sum(s["seconds_at_least"] for s in out["steps"])
+    assert steps_s < out["seconds_at_least"] < steps_s + 10.0  # plus the pretest
+    assert main(["plans", "show", "paper"]) == 0
+    text = capsys.readouterr().out
+    assert "2 N, up: 56 steps, 21 .. 40 Hz" in text and "acquisition at least" in text
+    assert main(["plans", "show", "linear"]) == 0
+    assert "66 records of 8 s" in capsys.readouterr().out
