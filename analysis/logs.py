@@ -25,8 +25,16 @@ import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
-__all__ = ["INPUT_FILE_OPTIONS", "MHB_NOT_CONVERGED", "Repeated", "StageCounts",
-           "add_debug_option", "configure_logging", "note_inputs", "summarise_repeats"]  # fmt: skip
+__all__ = [
+    "INPUT_FILE_OPTIONS",
+    "MHB_NOT_CONVERGED",
+    "Repeated",
+    "StageCounts",
+    "add_debug_option",
+    "configure_logging",
+    "note_inputs",
+    "summarise_repeats",
+]
 
 log = logging.getLogger("analysis")
 

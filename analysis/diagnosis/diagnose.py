@@ -88,8 +88,9 @@ def _linear_steps(pred: BranchMatchedPredictor) -> np.ndarray:
     return out
 
 
-def _run_verifications(ex, jobs: list[VerifyJob], essential: int, enough, workers: int,
-                       follow=None, started=()) -> tuple[dict, dict]:  # fmt: skip
+def _run_verifications(
+    ex, jobs: list[VerifyJob], essential: int, enough, workers: int, follow=None, started=()
+) -> tuple[dict, dict]:
     """Run verification jobs (on ``ex``, at most ``workers`` at a time, or in this process)
     in order; the jobs after the first ``essential`` start one at a time once the jobs before
     them are in, and are dropped once ``enough`` of the results so far holds (so which run
@@ -156,8 +157,7 @@ class _Later:
 
 
 def _screen_from(model: Model, data, st: DiagnosisSettings, pred=None) -> Screen:
-    pred = pred or BranchMatchedPredictor(model, data, n_harmonics=st.n_harmonics,
-                                          n_time=st.n_time)  # fmt: skip
+    pred = pred or BranchMatchedPredictor(model, data, n_harmonics=st.n_harmonics, n_time=st.n_time)
     return Screen(model, data, predictor=pred)
 
 
@@ -241,13 +241,25 @@ def _shortlist(
             # each family's best apart from the picks so far (a contact-like law in a joint
             # can lead and belong to one family while the evidence also points at another)
             kinds = FAMILIES.get(fam, ())
-            picks.append(next((f for f in by_bic if f.candidate.law.kind in kinds and all(
-                f.candidate != g.candidate for g in picks if g is not None)), None))  # fmt: skip
+            picks.append(
+                next(
+                    (
+                        f
+                        for f in by_bic
+                        if f.candidate.law.kind in kinds
+                        and all(f.candidate != g.candidate for g in picks if g is not None)
+                    ),
+                    None,
+                )
+            )
         for f in picks:
             # only where the class explains a fair share of what the best candidate does
             gain = screen_gain(f)
-            if (f is not None and gain >= class_share * best_gain
-                    and all(f.candidate != g.candidate for g in first + classes)):  # fmt: skip
+            if (
+                f is not None
+                and gain >= class_share * best_gain
+                and all(f.candidate != g.candidate for g in first + classes)
+            ):
                 classes.append(f)
     first[n_lead:n_lead] = sorted(classes, key=lambda f: f.bic)
     second: list[ScreenFit] = []
@@ -259,8 +271,14 @@ def _shortlist(
             second.append(f)
     for fam in evidence.families:
         fam_kinds = FAMILIES.get(fam, ())
-        best = next((f for f in nonlinear if f.candidate.law.kind in fam_kinds
-                     and f.candidate.location.kind == "point"), None)  # fmt: skip
+        best = next(
+            (
+                f
+                for f in nonlinear
+                if f.candidate.law.kind in fam_kinds and f.candidate.location.kind == "point"
+            ),
+            None,
+        )
         if best is not None and all(best.candidate != g.candidate for g in first + second):
             second.append(best)
     return first, second[:4]
@@ -269,8 +287,14 @@ def _shortlist(
 def _other_points(fits: list[ScreenFit], cand: Candidate, done) -> list[ScreenFit]:
     """Screened fits of ``cand``'s law at the other measured points, best first, leaving out
     the candidates in ``done``."""
-    return [f for f in fits if f.candidate.law == cand.law and f.candidate.location.kind == "point"
-            and f.candidate.location != cand.location and f.candidate not in done]  # fmt: skip
+    return [
+        f
+        for f in fits
+        if f.candidate.law == cand.law
+        and f.candidate.location.kind == "point"
+        and f.candidate.location != cand.location
+        and f.candidate not in done
+    ]
 
 
 def _walk_jobs(best, fits: list[ScreenFit], tried, n: int):
@@ -305,8 +329,9 @@ def _promising(v: Verified, refit: Verified, st: DiagnosisSettings) -> bool:
     return v.rms_over_noise() <= st.restart_fraction * refit.rms_over_noise()
 
 
-def _to_continue(done: list[Verified], refit: Verified, st: DiagnosisSettings,
-                 time_left: bool, continued=()) -> list[int]:  # fmt: skip
+def _to_continue(
+    done: list[Verified], refit: Verified, st: DiagnosisSettings, time_left: bool, continued=()
+) -> list[int]:
     """The verifications that go on from where they stopped: at most two (best first) with
     those in ``continued`` (gone on already, as soon as they finished: :func:`_goes_on_at_once`).
 
@@ -317,9 +342,16 @@ def _to_continue(done: list[Verified], refit: Verified, st: DiagnosisSettings,
     reaches: the start model's tangents can stall a fit above the noise near a jump (the
     clamp's friction at 3.4 x the noise's chi-square, 1.16 one iteration after reweighting).
     """
-    going = [i for i, v in enumerate(done) if i not in continued and not v.failed and (
-        _promising(v, refit, st) or (v.stopped and v.last_decrease() >= st.continue_decrease
-                                     and time_left))]  # fmt: skip
+    going = [
+        i
+        for i, v in enumerate(done)
+        if i not in continued
+        and not v.failed
+        and (
+            _promising(v, refit, st)
+            or (v.stopped and v.last_decrease() >= st.continue_decrease and time_left)
+        )
+    ]
     return sorted(going, key=lambda i: done[i].chi2_per_dof())[: max(2 - len(continued), 0)]
 
 
@@ -340,14 +372,20 @@ def _merge(done: list[Verified], i: int, v: Verified) -> None:
         done[i] = v
 
 
-def _other_laws(screen: Screen, fits: list[ScreenFit], cand: Candidate, tried,
-                n: int) -> list[ScreenFit]:  # fmt: skip
+def _other_laws(
+    screen: Screen, fits: list[ScreenFit], cand: Candidate, tried, n: int
+) -> list[ScreenFit]:
     """Other laws at ``cand``'s location (a group of springs, a joint), refined: of the next
     ``n + 1`` by BIC, the ``n`` simplest. Look-alike laws there screen alike (the mounts'
     cubic hardening ranked fourth behind a contact, a two-sided gap and a gap spring, all
     stiffening), and on a tie the simpler law is preferred."""
-    there = [screen.refined(f) for f in fits if f.candidate.location == cand.location
-             and f.candidate.law != cand.law and f.candidate not in tried]  # fmt: skip
+    there = [
+        screen.refined(f)
+        for f in fits
+        if f.candidate.location == cand.location
+        and f.candidate.law != cand.law
+        and f.candidate not in tried
+    ]
     near = sorted(there, key=lambda f: f.bic)[: n + 1]
     return sorted(near, key=lambda f: (f.candidate.n_params, f.bic))[:n]
 
@@ -357,8 +395,11 @@ def _linear_shortlist(base: LinearFit | None, fits: list[LinearFit], st: Diagnos
     misfit (the best, and those tied with it)."""
     if base is None or base.failed:
         return []
-    good = [f for f in fits if not f.failed and f.delta_bic < -st.linear_bic
-            and f.cost <= st.linear_ratio * base.cost]  # fmt: skip
+    good = [
+        f
+        for f in fits
+        if not f.failed and f.delta_bic < -st.linear_bic and f.cost <= st.linear_ratio * base.cost
+    ]
     if not good:
         return []
     return [f for f in good if f.bic - good[0].bic <= st.tie_bic][:2]
@@ -412,27 +453,47 @@ def diagnose(
 
     def verify_job(cand, values=None, known=None, start_toml=None, n_starts=0, seed=0):
         return VerifyJob(
-            text, source, path, None, cand, dict(values or {}), dict(known or {}),
-            None if linear_run is None else str(linear_run), st.verify_iterations, n_starts,
-            seed, start_toml, st.n_harmonics, st.n_time, st.verify_seconds,
+            text,
+            source,
+            path,
+            None,
+            cand,
+            dict(values or {}),
+            dict(known or {}),
+            None if linear_run is None else str(linear_run),
+            st.verify_iterations,
+            n_starts,
+            seed,
+            start_toml,
+            st.n_harmonics,
+            st.n_time,
+            st.verify_seconds,
             reweight_drop=st.reweight_drop,
-        )  # fmt: skip
+        )
 
     with open_executor(st.workers) as ex:
         t1 = time.perf_counter()
-        nonlinear = [c for c in cands if not (linear_run is not None and c.law.kind in (
-            "mass", "linear_spring", "joint_spring"))]  # fmt: skip
+        nonlinear = [
+            c
+            for c in cands
+            if not (
+                linear_run is not None and c.law.kind in ("mass", "linear_spring", "joint_spring")
+            )
+        ]
         # the screen's first pass shared with a worker; the recalibration and the linear
         # test's candidates on the workers meanwhile
         mine, theirs = (nonlinear[0::2], nonlinear[1::2]) if ex is not None else (nonlinear, [])
-        share = _Later(ex, screen_pass, ScreenJob(text, source, path, tuple(theirs),
-                                                  st.n_harmonics, st.n_time))  # fmt: skip
+        share = _Later(
+            ex, screen_pass, ScreenJob(text, source, path, tuple(theirs), st.n_harmonics, st.n_time)
+        )
         refit_job = _Later(ex, run_verify, verify_job(None))
         lin_jobs = []
         if linear_run is not None:
             lin = [c for c in cands if c.law.kind in ("mass", "linear_spring", "joint_spring")]
-            lin_jobs = [_Later(ex, run_linear_job, LinearJob(text, source, str(linear_run), c))
-                        for c in [None, *lin]]  # fmt: skip
+            lin_jobs = [
+                _Later(ex, run_linear_job, LinearJob(text, source, str(linear_run), c))
+                for c in [None, *lin]
+            ]
         screen = _screen_from(model, data, st, pred)
         baseline = screen.baseline()
         fits = screen.first_pass(mine, progress) + (share.result() if theirs else [])
@@ -446,9 +507,15 @@ def diagnose(
         lead = _lead(fits)
         early = []
         if ex is not None and lead is not None and not _settled(refit, cmp, st):
-            early = [ex.submit(run_verify, dataclasses.replace(
-                verify_job(lead.candidate, lead.values, lead.known),
-                give_up_chi2=refit.chi2_per_dof()))]  # fmt: skip
+            early = [
+                ex.submit(
+                    run_verify,
+                    dataclasses.replace(
+                        verify_job(lead.candidate, lead.values, lead.known),
+                        give_up_chi2=refit.chi2_per_dof(),
+                    ),
+                )
+            ]
         t2 = time.perf_counter()
         first, second = _shortlist(screen, fits, evidence, st.n_verify, baseline.bic)
         timings["shortlist_s"] = time.perf_counter() - t2
@@ -459,12 +526,15 @@ def diagnose(
             for f in lin_fits:
                 f.delta_bic = f.bic - lin_base.bic
             lin_fits.sort(key=lambda f: f.bic)
-            say("linear screen", {"n": len(lin_fits), "best": lin_fits[0].candidate.label
-                                  if lin_fits else ""})  # fmt: skip
+            say(
+                "linear screen",
+                {"n": len(lin_fits), "best": lin_fits[0].candidate.label if lin_fits else ""},
+            )
         timings["refit_s"] = refit.seconds
         say("recalibrated", {"rms_over_noise": refit.rms_over_noise()})
-        result = Diagnosis("adequate", cmp, evidence, fits, baseline, lin_fits, refit,
-                           timings=timings, settings=st)  # fmt: skip
+        result = Diagnosis(
+            "adequate", cmp, evidence, fits, baseline, lin_fits, refit, timings=timings, settings=st
+        )
         if refit.rms_over_noise() <= st.adequate_rms:
             timings["total_s"] = time.perf_counter() - t0
             return result
@@ -493,10 +563,15 @@ def diagnose(
         essential = len(origin) - len(first) + min(3, len(first))
         # a candidate no better than the model recalibrated without it stops early
         bar = refit.chi2_per_dof()
-        jobs = [dataclasses.replace(
-            verify_job(o.candidate, start_toml=o.model_toml) if isinstance(o, LinearFit)
-            else verify_job(o.candidate, o.values, o.known), give_up_chi2=bar)
-            for o in origin]  # fmt: skip
+        jobs = [
+            dataclasses.replace(
+                verify_job(o.candidate, start_toml=o.model_toml)
+                if isinstance(o, LinearFit)
+                else verify_job(o.candidate, o.values, o.known),
+                give_up_chi2=bar,
+            )
+            for o in origin
+        ]
 
         def enough(vs: list[Verified]) -> bool:
             # one at the noise, or the processor time of the stage spent
@@ -560,15 +635,21 @@ def diagnose(
                 laws = _other_laws(screen, fits, lead.candidate, tried, st.n_walk)
                 walk = [(f, f.values, f.known) for f in laws]
                 say("other laws", {"n": len(walk)})
-            more = [_Later(ex, run_verify, dataclasses.replace(
-                verify_job(f.candidate, values, known), give_up_chi2=bar))
-                for f, values, known in walk]  # fmt: skip
+            more = [
+                _Later(
+                    ex,
+                    run_verify,
+                    dataclasses.replace(verify_job(f.candidate, values, known), give_up_chi2=bar),
+                )
+                for f, values, known in walk
+            ]
             done += [p.result() for p in more]
             origin += [f for f, _, _ in walk]
 
         if unexplained() and second and left() > 0:
-            more = [_Later(ex, run_verify, verify_job(f.candidate, f.values, f.known))
-                    for f in second]  # fmt: skip
+            more = [
+                _Later(ex, run_verify, verify_job(f.candidate, f.values, f.known)) for f in second
+            ]
             done += [p.result() for p in more]
             origin += second
             say("verified", {"n": len(done), "best_rms": _best_rms(done)})
@@ -576,8 +657,13 @@ def diagnose(
         best_rms = done[order[0]].rms_over_noise() if done else math.inf
         # further starts only for a candidate that went most of the way (a local minimum of
         # a strong effect), not for one that explains little
-        if (st.n_starts > 0 and best_rms > st.explained_rms and done
-                and _promising(done[order[0]], refit, st) and left() > 0):  # fmt: skip
+        if (
+            st.n_starts > 0
+            and best_rms > st.explained_rms
+            and done
+            and _promising(done[order[0]], refit, st)
+            and left() > 0
+        ):
             again = [int(i) for i in order[:2] if not done[i].failed]
             say("restart", {"n": len(again)})
             retry = []
@@ -618,8 +704,11 @@ def _rank(model: Model, refit: Verified, origin: list, done: list[Verified], st)
     base_step = refit.step_chi2
     n_base = int(np.isfinite(base_step).sum())
     # a recalibrated model that fails on many steps the model solves is not comparable
-    keep = [(o, v) for o, v in zip(origin, done, strict=True) if not v.failed
-            and np.isfinite(v.step_chi2[np.isfinite(base_step)]).sum() >= 0.9 * n_base]  # fmt: skip
+    keep = [
+        (o, v)
+        for o, v in zip(origin, done, strict=True)
+        if not v.failed and np.isfinite(v.step_chi2[np.isfinite(base_step)]).sum() >= 0.9 * n_base
+    ]
     common = np.isfinite(base_step)
     for _, v in keep:
         common &= np.isfinite(v.step_chi2)
@@ -637,18 +726,24 @@ def _rank(model: Model, refit: Verified, origin: list, done: list[Verified], st)
         return [], model_bic
     scored.sort(key=lambda t: t[0])
     best = scored[0][0]
-    tied = sorted([t for t in scored if t[0] - best <= st.tie_bic],
-                  key=lambda t: (t[1].candidate.n_params, t[0]))  # fmt: skip
+    tied = sorted(
+        [t for t in scored if t[0] - best <= st.tie_bic],
+        key=lambda t: (t[1].candidate.n_params, t[0]),
+    )
     rest = [t for t in scored if t[0] - best > st.tie_bic]
     ranked = []
     for i, (bic, o, v) in enumerate(tied + rest):
         ranked.append(
             RankedCandidate(
-                rank=i + 1, group=1 if i < len(tied) else i - len(tied) + 2,
-                candidate=o.candidate, bic=bic, delta_bic=bic - model_bic,
-                rms_over_noise=v.rms_over_noise(common), verified=v,
+                rank=i + 1,
+                group=1 if i < len(tied) else i - len(tied) + 2,
+                candidate=o.candidate,
+                bic=bic,
+                delta_bic=bic - model_bic,
+                rms_over_noise=v.rms_over_noise(common),
+                verified=v,
                 screen=o if isinstance(o, ScreenFit) else None,
                 linear=o if isinstance(o, LinearFit) else None,
             )
-        )  # fmt: skip
+        )
     return ranked, model_bic

@@ -109,8 +109,12 @@ def _watch(seen: list, progress, deadline: float | None, give_up, drop, h: dict)
         progress("lm", h)
     if deadline is not None and time.process_time() > deadline and h["iteration"] > 0:
         raise _OutOfTime
-    if (drop is not None and h["iteration"] >= 1 and h["cost"] * drop < seen[0]["cost"]
-            and h["cost"] > (1 - STALL) * seen[-2]["cost"]):  # fmt: skip
+    if (
+        drop is not None
+        and h["iteration"] >= 1
+        and h["cost"] * drop < seen[0]["cost"]
+        and h["cost"] > (1 - STALL) * seen[-2]["cost"]
+    ):
         raise _Reweigh
     if give_up is not None and h["iteration"] >= 1 and len(seen) >= 2:
         # still above the bar and no longer falling fast: hopeless two iterations in, or one
@@ -148,8 +152,9 @@ def _stopped(
     x = np.array(seen[-1]["x"])
     r = fun.r if fun.x is not None and np.array_equal(fun.x, x) else fun.obj(x, False)[0]
     cov = np.full((x.size, x.size), np.nan)
-    return LeastSquaresResult(x, 0.5 * float(r @ r), r, None, cov, 0, 0, seen[-1]["iteration"],
-                              False, message, list(seen))  # fmt: skip
+    return LeastSquaresResult(
+        x, 0.5 * float(r @ r), r, None, cov, 0, 0, seen[-1]["iteration"], False, message, list(seen)
+    )
 
 
 def _current(model: Model, name: str) -> float:
@@ -244,12 +249,28 @@ def refit(
     Refit
     """
     if reweight_passes:
-        again = functools.partial(refit, data=data, parameters=parameters, rows=rows, ftol=ftol,
-                                  n_harmonics=n_harmonics, n_time=n_time, progress=progress,
-                                  max_seconds=max_seconds, reweight_drop=reweight_drop)  # fmt: skip
-        first = again(model, starts=starts, distributions=distributions,
-                      n_random_starts=n_random_starts, n_lm_starts=n_lm_starts, seed=seed,
-                      max_iterations=max_iterations, give_up_chi2=give_up_chi2)  # fmt: skip
+        again = functools.partial(
+            refit,
+            data=data,
+            parameters=parameters,
+            rows=rows,
+            ftol=ftol,
+            n_harmonics=n_harmonics,
+            n_time=n_time,
+            progress=progress,
+            max_seconds=max_seconds,
+            reweight_drop=reweight_drop,
+        )
+        first = again(
+            model,
+            starts=starts,
+            distributions=distributions,
+            n_random_starts=n_random_starts,
+            n_lm_starts=n_lm_starts,
+            seed=seed,
+            max_iterations=max_iterations,
+            give_up_chi2=give_up_chi2,
+        )
         return _reweighted(first, again, reweight_passes, max_iterations)
     t0 = time.perf_counter()
     names = tuple(parameters)
@@ -307,9 +328,13 @@ def refit(
             bar = (give_up_chi2, lambda fun=fun: max(fun.r.size - space.size, 1))
         try:
             res = least_squares_lm(
-                fun, thetas[k], bounds=(lo, hi), max_iterations=max_iterations, ftol=ftol,
+                fun,
+                thetas[k],
+                bounds=(lo, hi),
+                max_iterations=max_iterations,
+                ftol=ftol,
                 callback=functools.partial(_watch, seen, progress, deadline, bar, drop),
-            )  # fmt: skip
+            )
         except _Reweigh:
             res, reweigh = _stopped(fun, seen, "reweighted"), True
         except _GiveUp:
@@ -349,19 +374,34 @@ def refit(
     if not reweigh or best.nit >= max_iterations or (left is not None and left <= 0):
         return out
     try:
-        nxt = refit(fitted, data, parameters, rows=rows, ftol=ftol, n_harmonics=n_harmonics,
-                    n_time=n_time, progress=progress, max_seconds=left,
-                    give_up_chi2=give_up_chi2, max_iterations=max_iterations - best.nit,
-                    reweight_drop=reweight_drop)  # fmt: skip
+        nxt = refit(
+            fitted,
+            data,
+            parameters,
+            rows=rows,
+            ftol=ftol,
+            n_harmonics=n_harmonics,
+            n_time=n_time,
+            progress=progress,
+            max_seconds=left,
+            give_up_chi2=give_up_chi2,
+            max_iterations=max_iterations - best.nit,
+            reweight_drop=reweight_drop,
+        )
     except (RuntimeError, ValueError) as exc:  # the fitted model fails on a fitted step
         log.info("no fit with the weights recomputed: %s", exc)
         return out
     # "pass" numbers the fits with their own weights
-    later = [{**h, "iteration": h["iteration"] + best.nit, "pass": h.get("pass", 0) + 1}
-             for h in nxt.history]  # fmt: skip
-    return dataclasses.replace(nxt, history=[{**h, "pass": 0} for h in history] + later,
-                               start_costs=out.start_costs,
-                               seconds=time.perf_counter() - t0)  # fmt: skip
+    later = [
+        {**h, "iteration": h["iteration"] + best.nit, "pass": h.get("pass", 0) + 1}
+        for h in nxt.history
+    ]
+    return dataclasses.replace(
+        nxt,
+        history=[{**h, "pass": 0} for h in history] + later,
+        start_costs=out.start_costs,
+        seconds=time.perf_counter() - t0,
+    )
 
 
 def _reweighted(fit: Refit, again: Callable[..., Refit], passes: int, max_iterations: int) -> Refit:
@@ -388,5 +428,6 @@ def _reweighted(fit: Refit, again: Callable[..., Refit], passes: int, max_iterat
         history += [{**h, "iteration": h["iteration"] + offset, "pass": k} for h in f.history]
         offset = history[-1]["iteration"]
     log.info("reweighted fits: own chi2/dof %s, kept pass %d", own, kept)
-    return dataclasses.replace(fits[kept], history=history, start_costs=fit.start_costs,
-                               seconds=time.perf_counter() - t0)  # fmt: skip
+    return dataclasses.replace(
+        fits[kept], history=history, start_costs=fit.start_costs, seconds=time.perf_counter() - t0
+    )

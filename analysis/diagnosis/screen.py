@@ -497,9 +497,11 @@ class Screen:
             lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
             if hi > lo:
                 opt = minimize_scalar(
-                    lambda g: search({name: g}), bounds=(lo, hi), method="bounded",
+                    lambda g: search({name: g}),
+                    bounds=(lo, hi),
+                    method="bounded",
                     options={"xatol": 5e-3 * amp, "maxiter": 5},
-                )  # fmt: skip
+                )
                 if opt.fun < best_rss:
                     best_gap = float(opt.x)
             rss, n, theta, known = run({name: best_gap})
@@ -565,9 +567,15 @@ class Screen:
         cands = list(candidates)
         later = None
         if executor is not None and len(cands) > 8:
-            job = ScreenJob(self.model.to_toml(), str(self.model.source), str(self.data.path),
-                            tuple(cands[1::2]), self.predictor.settings["n_harmonics"],
-                            self.predictor.settings["n_time"], self.free)  # fmt: skip
+            job = ScreenJob(
+                self.model.to_toml(),
+                str(self.model.source),
+                str(self.data.path),
+                tuple(cands[1::2]),
+                self.predictor.settings["n_harmonics"],
+                self.predictor.settings["n_time"],
+                self.free,
+            )
             later = executor.submit(screen_pass, job)
             cands = cands[0::2]
         fits = self.first_pass(cands, progress)
@@ -610,7 +618,8 @@ class Screen:
             log.warning("screen of %s failed: %s", f.candidate.label, exc)
             return f
         out = self._refined[f.candidate.label] = dataclasses.replace(
-            g if g.bic < f.bic else f, refined=True)  # fmt: skip
+            g if g.bic < f.bic else f, refined=True
+        )
         return out
 
     # -- one fit ------------------------------------------------------------------------------
@@ -884,9 +893,11 @@ class Screen:
             Z = np.matmul(S, V)
             y0 = Z[:, :, 0].ravel()
             cur = np.array(
-                [known[nm] if kd == "known" else theta.get(nm, 0.0) if kd == "cand" else 0.0
-                 for kd, nm in names]
-            )  # fmt: skip
+                [
+                    known[nm] if kd == "known" else theta.get(nm, 0.0) if kd == "cand" else 0.0
+                    for kd, nm in names
+                ]
+            )
             Am = Z[:, :, 1:].reshape(n * 2 * K * C, q - 1)
             x, rss = _bounded_lsq(Am, y0 + Am @ cur, np.array(lower, float))
             for (kd, nm), v in zip(names, x, strict=True):

@@ -15,8 +15,9 @@ MHB = logging.getLogger("analysis.mhb.sweep")
 
 def _fail_steps(n: int, start: int = 0) -> int:
     for i in range(start, start + n):
-        MHB.warning("MHB step %d (%.4g Hz) did not converge: %s", i, 20 + 0.1 * i,
-                    "line search failed")  # fmt: skip
+        MHB.warning(
+            "MHB step %d (%.4g Hz) did not converge: %s", i, 20 + 0.1 * i, "line search failed"
+        )
     return n
 
 

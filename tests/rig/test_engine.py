@@ -174,9 +174,12 @@ def _truth_frfs(data):
     force phasors in the order the steps were measured, with the shaker's static support
     from the file (the analysis' own predictor)."""
     pred = SteppedSinePredictor(
-        load_truth("reference").model, data, channels=("acc3", "acc6", "acc7"),
-        n_harmonics=15, n_time=512,
-    )  # fmt: skip
+        load_truth("reference").model,
+        data,
+        channels=("acc3", "acc6", "acc7"),
+        n_harmonics=15,
+        n_time=512,
+    )
     p = pred.predict()
     assert np.all(p.converged)
     return p.frf

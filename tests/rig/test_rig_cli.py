@@ -76,14 +76,26 @@ def test_ni_backend_without_driver_points_to_sim(files, tmp_path):
 def _start(files, out, *extra):
     return subprocess.Popen(
         [
-            sys.executable, "-m", "rig", "run", files / "steps.toml", "--backend", "sim",
-            "--setup", files / "setup.toml", "--out", out, "--lock-dir", files, *map(str, extra),
+            sys.executable,
+            "-m",
+            "rig",
+            "run",
+            files / "steps.toml",
+            "--backend",
+            "sim",
+            "--setup",
+            files / "setup.toml",
+            "--out",
+            out,
+            "--lock-dir",
+            files,
+            *map(str, extra),
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         env=ENV,
-    )  # fmt: skip
+    )
 
 
 def _wait_for_step(proc, n, deadline_s=60.0):
@@ -137,17 +149,36 @@ def test_ctrl_c_stops_cleanly(files, tmp_path):
 def test_run_linear_and_export(files, tmp_path):
     out = tmp_path / "run.h5"
     r = _rig(
-        "run", files / "steps.toml", "--backend", "sim", "--setup", files / "setup.toml",
-        "--out", out, "--lock-dir", files, "--seed", "3",
-    )  # fmt: skip
+        "run",
+        files / "steps.toml",
+        "--backend",
+        "sim",
+        "--setup",
+        files / "setup.toml",
+        "--out",
+        out,
+        "--lock-dir",
+        files,
+        "--seed",
+        "3",
+    )
     assert r.returncode == 0, r.stderr
     assert "steps     22 of 22 on disk" in r.stdout and "converged" in r.stdout
     assert re.search(r"step 22/22 \[#+\]", r.stderr)
     lin = tmp_path / "lin.h5"
     r = _rig(
-        "linear", files / "random.toml", "--backend", "sim", "--setup", files / "setup.toml",
-        "--out", lin, "--lock-dir", files, "--json",
-    )  # fmt: skip
+        "linear",
+        files / "random.toml",
+        "--backend",
+        "sim",
+        "--setup",
+        files / "setup.toml",
+        "--out",
+        lin,
+        "--lock-dir",
+        files,
+        "--json",
+    )
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout.strip().splitlines()[-1])["status"] == "success"
     data = read_measurement(lin)
@@ -204,9 +235,20 @@ def test_the_library_keeps_its_own_wording_and_the_cli_rephrases_each_kind(tmp_p
 def test_a_simulated_fault_switched_on_from_the_command_line(files, tmp_path):
     out = tmp_path / "fault.h5"
     r = _rig(
-        "run", files / "steps.toml", "--setup", files / "setup.toml", "--out", out,
-        "--backend", "sim", "--lock-dir", files, "--json", "--fault", "acc7:disconnect@step3",
-    )  # fmt: skip
+        "run",
+        files / "steps.toml",
+        "--setup",
+        files / "setup.toml",
+        "--out",
+        out,
+        "--backend",
+        "sim",
+        "--lock-dir",
+        files,
+        "--json",
+        "--fault",
+        "acc7:disconnect@step3",
+    )
     assert r.returncode != 0
     summary = json.loads(r.stdout.strip().splitlines()[-1])
     assert summary["status"] == "aborted" and summary["n_done"] == 2, summary
@@ -231,9 +273,19 @@ def test_a_simulated_fault_switched_on_from_the_command_line(files, tmp_path):
 )
 def test_a_bad_fault_is_refused_with_the_syntax(files, tmp_path, spec, expected):
     r = _rig(
-        "run", files / "steps.toml", "--setup", files / "setup.toml", "--out",
-        tmp_path / "x.h5", "--backend", "sim", "--lock-dir", files, "--fault", spec,
-    )  # fmt: skip
+        "run",
+        files / "steps.toml",
+        "--setup",
+        files / "setup.toml",
+        "--out",
+        tmp_path / "x.h5",
+        "--backend",
+        "sim",
+        "--lock-dir",
+        files,
+        "--fault",
+        spec,
+    )
     assert r.returncode == 2, r.stderr
     assert expected in r.stderr and f"--fault {spec!r}" in r.stderr
     assert "Traceback" not in r.stderr

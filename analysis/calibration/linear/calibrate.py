@@ -265,9 +265,17 @@ def calibrate_linear(
     def objective(
         channels: list[int], eq, base: Model = model_s, sub: ParameterSpace = space
     ) -> EqualizedFRFObjective:
-        return EqualizedFRFObjective(base, sub, [rows[i] for i in channels], col,
-                                     eq.frequency_hz, eq.H[:, channels], eq.zeta0, f_max,
-                                     st.use_phase)  # fmt: skip
+        return EqualizedFRFObjective(
+            base,
+            sub,
+            [rows[i] for i in channels],
+            col,
+            eq.frequency_hz,
+            eq.H[:, channels],
+            eq.zeta0,
+            f_max,
+            st.use_phase,
+        )
 
     every = objective(list(range(len(rows))), eq)
     cal, val = split_channels(run_frfs, st.calibration_points, every, x0, st.n_calibration)
@@ -313,9 +321,18 @@ def calibrate_linear(
         )
         sol.fun = sol.fun[: -len(fitted)]
         sol.jac = sol.jac[: -len(fitted)]
-        stages.append({"zeta0": zeta0, "prior": True, "cost": float(sol.cost), "nit": int(sol.nit),
-                       "nfev": int(sol.nfev), "njev": int(sol.njev),
-                       "success": bool(sol.success), "message": sol.message})  # fmt: skip
+        stages.append(
+            {
+                "zeta0": zeta0,
+                "prior": True,
+                "cost": float(sol.cost),
+                "nit": int(sol.nit),
+                "nfev": int(sol.nfev),
+                "njev": int(sol.njev),
+                "success": bool(sol.success),
+                "message": sol.message,
+            }
+        )
         cov_f = np.linalg.inv(np.linalg.inv(cov_d) + np.diag(precision))
         estimator += "; combined with the model file's priors (MAP)"
     else:
@@ -359,26 +376,44 @@ def calibrate_linear(
     t_end = time.perf_counter()
     log.info("linear calibration: %s, %d iterations, cost %.4g", sol.message, sol.nit, sol.cost)
     return LinearCalibration(
-        x=x_all, cost=float(sol.cost), jac=sol.jac, cov=cov,
-        nfev=sum(g["nfev"] for g in stages), njev=sum(g["njev"] for g in stages),
-        nit=sum(g["nit"] for g in stages), success=sol.success, message=sol.message,
-        names=tuple(names), stages=stages, status=status, status_reason=reasons,
+        x=x_all,
+        cost=float(sol.cost),
+        jac=sol.jac,
+        cov=cov,
+        nfev=sum(g["nfev"] for g in stages),
+        njev=sum(g["njev"] for g in stages),
+        nit=sum(g["nit"] for g in stages),
+        success=sol.success,
+        message=sol.message,
+        names=tuple(names),
+        stages=stages,
+        status=status,
+        status_reason=reasons,
         prior_rel_std={n: model.parameters[n].prior_rel_std for n in names},
         damping_rel_std=zeta_std,
         covariance_estimator=estimator,
-        parameters=values, start=space.as_dict(p0), zeta0=zeta0,
+        parameters=values,
+        start=space.as_dict(p0),
+        zeta0=zeta0,
         metric_frequency_hz=eq.frequency_hz,
         calibration_channels=tuple(run_frfs.channels[i] for i in cal),
         validation_channels=tuple(run_frfs.channels[i] for i in val),
         calibration_points=tuple(sorted({run_frfs.points[i] for i in cal})),
         validation_points=tuple(sorted({run_frfs.points[i] for i in val})),
-        fit=fit, modes=pairs, validation=validation, model=out_model,
+        fit=fit,
+        modes=pairs,
+        validation=validation,
+        model=out_model,
         settings={**st.to_json(), "zeta0_used": zeta0, "sensor_masses_kg": masses},
         source=run_frfs.source,
-        timings={"identification_s": t_id - t0, "calibration_s": t_fit - t_id,
-                 "validation_s": t_end - t_fit, "total_s": t_end - t0},
+        timings={
+            "identification_s": t_id - t0,
+            "calibration_s": t_fit - t_id,
+            "validation_s": t_end - t_fit,
+            "total_s": t_end - t0,
+        },
         unidentified_modes=unidentified,
-    )  # fmt: skip
+    )
 
 
 # -- what the test determines -----------------------------------------------------------------
@@ -465,9 +500,13 @@ def decide_weak(model: Model, space: ParameterSpace, x: np.ndarray, cov: np.ndar
                 "reason": f"{why}: {held_at} with the prior's +-{100 * prior:.3g} %",
             }
         else:
-            out[name] = {"status": "at_bound", "reason": (
-                f"{why}: {held_at}; no prior is known (give prior_rel_std in the model file), "
-                "so its uncertainty is not known")}  # fmt: skip
+            out[name] = {
+                "status": "at_bound",
+                "reason": (
+                    f"{why}: {held_at}; no prior is known (give prior_rel_std in the model file), "
+                    "so its uncertainty is not known"
+                ),
+            }
         # a bound first, then the least informed: the others are fitted again with it held
         out[name]["priority"] = (bool(side), float(1.0 - share[i]))
     return out
@@ -485,8 +524,14 @@ def _first(weak: dict) -> dict:
 
 def _prior_precision(model: Model, names) -> np.ndarray:
     """``1 / prior_rel_std^2`` per parameter in scaled coordinates (0: no prior)."""
-    return np.array([0.0 if model.parameters[n].prior_rel_std is None
-                     else model.parameters[n].prior_rel_std ** -2 for n in names])  # fmt: skip
+    return np.array(
+        [
+            0.0
+            if model.parameters[n].prior_rel_std is None
+            else model.parameters[n].prior_rel_std ** -2
+            for n in names
+        ]
+    )
 
 
 def _data_weight(sol, cov_d: np.ndarray) -> float:
@@ -568,9 +613,17 @@ def _continuation(make_objective, zetas, x0, bounds, st):
     for z in zetas:
         sol = METHODS[st.method](make_objective(z), x, bounds, st.max_iterations)
         x = sol.x
-        stages.append({"zeta0": z, "cost": float(sol.cost), "nit": int(sol.nit),
-                       "nfev": int(sol.nfev), "njev": int(sol.njev),
-                       "success": bool(sol.success), "message": sol.message})  # fmt: skip
+        stages.append(
+            {
+                "zeta0": z,
+                "cost": float(sol.cost),
+                "nit": int(sol.nit),
+                "nfev": int(sol.nfev),
+                "njev": int(sol.njev),
+                "success": bool(sol.success),
+                "message": sol.message,
+            }
+        )
         log.info("zeta0 = %.4g: cost %.4g after %d iterations", z, sol.cost, sol.nit)
     return sol, stages
 
@@ -615,19 +668,25 @@ def _unidentified_modes(model: Model, asm, modes, names, pairs, band) -> list[di
     """The model's modes in ``band`` without a paired test mode, with ``d ln f / d ln p``
     (``asm`` and ``modes``: the model's assembly and modal analysis)."""
     paired = {pr.model_mode - 1 for pr in pairs if pr.model_mode is not None}  # 1-based
-    idx = [i for i, f in enumerate(modes.frequency_hz)
-           if band[0] <= f <= band[1] and i not in paired]  # fmt: skip
+    idx = [
+        i for i, f in enumerate(modes.frequency_hz) if band[0] <= f <= band[1] and i not in paired
+    ]
     if not idx:
         return []
-    dlam, _ = mode_sensitivities(asm.M, asm.K, modes, {n: asm.dM[n] for n in names},
-                                 {n: asm.dK[n] for n in names})  # fmt: skip
+    dlam, _ = mode_sensitivities(
+        asm.M, asm.K, modes, {n: asm.dM[n] for n in names}, {n: asm.dK[n] for n in names}
+    )
     lam = modes.omega**2
     return [
-        {"model_mode": int(i) + 1, "frequency_hz": float(modes.frequency_hz[i]),
-         "sensitivity": {n: float(0.5 * dlam[n][i] / lam[i] * model.parameters[n].value)
-                         for n in names}}
+        {
+            "model_mode": int(i) + 1,
+            "frequency_hz": float(modes.frequency_hz[i]),
+            "sensitivity": {
+                n: float(0.5 * dlam[n][i] / lam[i] * model.parameters[n].value) for n in names
+            },
+        }
         for i in idx
-    ]  # fmt: skip
+    ]
 
 
 def _without_sensors(bare: Model, loaded: Model, damping: DampingSpec):

@@ -156,8 +156,9 @@ def test_a_parameter_that_runs_to_a_bound_is_held_not_passed_on(tmp_path: Path) 
     its bound; it is reported as such and held at its nominal value with its prior, the
     calibrated model file does not carry the bound value, and the others are fitted with it
     held and its uncertainty carried into theirs."""
-    run = write_rig_run(tmp_path / "stiff.h5", noise=0.02, seed=4,
-                        values={**TRUE_VALUES, "E_frame": 340e9})  # fmt: skip
+    run = write_rig_run(
+        tmp_path / "stiff.h5", noise=0.02, seed=4, values={**TRUE_VALUES, "E_frame": 340e9}
+    )
     nominal = load_model()
     result = calibrate_linear(nominal, run)
     assert result.status["E_frame"] == "held"
@@ -198,17 +199,28 @@ def test_rejects_a_stepped_sine_file(tmp_path: Path) -> None:
 
 def test_rejects_a_channel_at_an_unknown_point(clean_run, tmp_path: Path) -> None:
     data = read_measurement(clean_run)
-    extra = ChannelInfo("acc14", 14, "y", "acceleration", "m/s^2", 10.0, "mV/g", "response",
-                        0.0055, "A14")  # fmt: skip
+    extra = ChannelInfo(
+        "acc14", 14, "y", "acceleration", "m/s^2", 10.0, "mV/g", "response", 0.0055, "A14"
+    )
     frf = RandomFRF(
         frequency_hz=data.frequency_hz,
         h1=np.column_stack([data.h1, data.h1[:, -1]]),
         coherence=np.column_stack([data.coherence, data.coherence[:, -1]]),
-        force_psd=data.force_psd, n_averages=data.n_averages, window=data.window,
-        overlap=data.overlap, fs_hz=data.fs_hz, rms_force_n=data.rms_force_n,
-    )  # fmt: skip
-    path = write_random(tmp_path / "extra.h5", channels=[*data.channels, extra],
-                        actuator=data.actuator, frf=frf, config={}, setup={})  # fmt: skip
+        force_psd=data.force_psd,
+        n_averages=data.n_averages,
+        window=data.window,
+        overlap=data.overlap,
+        fs_hz=data.fs_hz,
+        rms_force_n=data.rms_force_n,
+    )
+    path = write_random(
+        tmp_path / "extra.h5",
+        channels=[*data.channels, extra],
+        actuator=data.actuator,
+        frf=frf,
+        config={},
+        setup={},
+    )
     with pytest.raises(CalibrationError, match="'acc14'.*no measurement point 14"):
         calibrate_linear(load_model(), path)
 
@@ -225,9 +237,14 @@ def test_rejects_nonlinear_parameters(clean_run) -> None:
 
 @pytest.mark.parametrize(
     "change",
-    [{"method": "simplex"}, {"zeta0": 0.7}, {"calibration_points": "best"},
-     {"band_hz": (50.0, 10.0)}, {"zeta0_schedule": (0.0,)}],
-)  # fmt: skip
+    [
+        {"method": "simplex"},
+        {"zeta0": 0.7},
+        {"calibration_points": "best"},
+        {"band_hz": (50.0, 10.0)},
+        {"zeta0_schedule": (0.0,)},
+    ],
+)
 def test_settings_are_validated(change: dict) -> None:
     with pytest.raises(ValueError):
         dataclasses.replace(LinearCalibrationSettings(), **change)

@@ -48,9 +48,20 @@ def _events(path):
 
 @pytest.mark.parametrize(
     "command",
-    [["service"], ["service", "start"], ["service", "stop"], ["service", "status"], ["submit"],
-     ["list"], ["watch"], ["pause"], ["resume"], ["abort"], ["result"]],
-)  # fmt: skip
+    [
+        ["service"],
+        ["service", "start"],
+        ["service", "stop"],
+        ["service", "status"],
+        ["submit"],
+        ["list"],
+        ["watch"],
+        ["pause"],
+        ["resume"],
+        ["abort"],
+        ["result"],
+    ],
+)
 def test_help_of_every_service_command(command):
     r = rig(*command, "--help")
     assert r.returncode == 0 and "usage: rig" in r.stdout
@@ -124,10 +135,15 @@ def test_bad_requests_are_refused_with_reasons(shared_service):
         assert status == 400, data
         assert json.loads(data)["error"]["code"] == code
     with pytest.raises(ServiceError) as info:
-        client.submit({"name": "x", "kind": "stepped-sine", "points": [3, 99],
-                       "excitation": {"levels_n": [1.0]},
-                       "frequencies": {"ranges": [{"start_hz": 20.0, "stop_hz": 21.0,
-                                                   "step_hz": 1.0}]}})  # fmt: skip
+        client.submit(
+            {
+                "name": "x",
+                "kind": "stepped-sine",
+                "points": [3, 99],
+                "excitation": {"levels_n": [1.0]},
+                "frequencies": {"ranges": [{"start_hz": 20.0, "stop_hz": 21.0, "step_hz": 1.0}]},
+            }
+        )
     assert info.value.status == 400 and "99" in str(info.value)
     with pytest.raises(ServiceError) as info:
         client.run("r9999")
@@ -210,8 +226,14 @@ def test_paper_run_watched_by_three_paused_aborted_and_resumed(shared_service, p
         assert events[-1]["type"] == "RunState" and events[-1]["data"]["state"] == "aborted"
         kinds = [e["type"] for e in events]
         assert kinds.count("StepFinished") == n_aborted
-        for kind in ("RunStarted", "PretestFinished", "ControlIteration", "RunPaused",
-                     "RunResumed", "RunFinished"):  # fmt: skip
+        for kind in (
+            "RunStarted",
+            "PretestFinished",
+            "ControlIteration",
+            "RunPaused",
+            "RunResumed",
+            "RunFinished",
+        ):
             assert kind in kinds
     assert n_killed < len(_events(outs[1]))
 
@@ -288,8 +310,20 @@ def test_start_detached_status_and_stop(procs, tmp_path, bench):
     common = ["--service-dir", sdir]
     r = rig("service", "status", *common)
     assert r.returncode == 3 and "not running" in r.stdout
-    r = rig("service", "start", "--detach", "--backend", "sim", "--setup", bench / "setup.toml",
-            "--port", 0, "--lock-dir", tmp_path / "locks", *common)  # fmt: skip
+    r = rig(
+        "service",
+        "start",
+        "--detach",
+        "--backend",
+        "sim",
+        "--setup",
+        bench / "setup.toml",
+        "--port",
+        0,
+        "--lock-dir",
+        tmp_path / "locks",
+        *common,
+    )
     info = json.loads((sdir / "endpoint.json").read_text())
     procs.pids.append(info["pid"])
     assert r.returncode == 0, r.stderr
