@@ -253,42 +253,13 @@ def augment(
         )
         values, known = dict(fit.values), dict(fit.known) if known is None else known
         say("screen", {"values": values, "known": known})
-    m2, new = candidate.apply(model, dict(values))
-    if candidate.law.kind == "parameter":
-        m2 = m2.with_values({candidate.parameter: values[candidate.parameter]})
-    start = {}
-    for n, v in (known or {}).items():
-        if n in m2.parameters:
-            p = m2.parameters[n]
-            start[n] = float(np.clip(v, p.lower, p.upper))
-    m2 = m2.with_values(start)
+    m2, new = _with_candidate(model, candidate, values, known)
     base_rows = fitted_rows(data, _calibration_levels(data, validation_level_n))
     z = np.abs(before.residual[base_rows]) ** 2
     history: list[dict] = [
         {"stage": "model", "iteration": 0, "chi2_per_dof": float(np.nanmean(z)), "parameters": {}}
     ]
-    linear_info = None
-    linear_params = m2.parameter_names(group="linear", calibrate=True)
-    if candidate.is_linear and linear_run is not None:
-        from analysis.calibration.linear import calibrate_linear
-
-        res = calibrate_linear(
-            m2, linear_run, parameters=tuple(linear_params), min_modes=min(4, len(linear_params))
-        )
-        m2 = res.model
-        linear_info = {"parameters": res.parameters, "cost": res.cost}
-        history.append(
-            {
-                "stage": "linear",
-                "iteration": res.nit,
-                "chi2_per_dof": float("nan"),
-                "parameters": res.parameters,
-            }
-        )
-        say("linear", {"cost": res.cost, "parameters": res.parameters})
-        new = [n for n in new if m2.parameters[n].group != "linear"]
-    elif candidate.is_linear:
-        new = list(dict.fromkeys([*new, *linear_params]))
+    m2, new, linear_info = _linear_first(m2, new, candidate, linear_run, history, say)
     names = list(
         dict.fromkeys(
             [
@@ -336,7 +307,7 @@ def augment(
         balance.update(truncation_over_noise=t, checked_harmonics=n_harmonics)
         say("balance", {"n_harmonics": n_harmonics, "truncation_over_noise": t})
         if t >= TRUNCATION_SHARE:
-            r2 = refit(
+            r = refit(
                 r.model,
                 data,
                 names,
@@ -347,8 +318,7 @@ def augment(
                 n_time=nt,
                 reweight_passes=reweight_passes,
             )
-            history += [{**h, "stage": "finer balance"} for h in r2.history]
-            r = r2
+            history += [{**h, "stage": "finer balance"} for h in r.history]
             before = compare(model, data, predictor=_predictor(model, data, nh, nt))
             after = compare(r.model, data, predictor=_predictor(r.model, data, nh, nt))
             balance.update(n_harmonics=nh, n_time=nt, refined=True)
@@ -374,3 +344,46 @@ def augment(
         after.rms_over_noise,
     )
     return result
+
+
+def _with_candidate(model: Model, candidate: Candidate, values, known):
+    """The model with the candidate at ``values`` and its own nonlinear parameters at
+    ``known`` (within their bounds); also the candidate's new parameter names."""
+    m2, new = candidate.apply(model, dict(values))
+    if candidate.law.kind == "parameter":
+        m2 = m2.with_values({candidate.parameter: values[candidate.parameter]})
+    start = {}
+    for n, v in (known or {}).items():
+        if n in m2.parameters:
+            p = m2.parameters[n]
+            start[n] = float(np.clip(v, p.lower, p.upper))
+    return m2.with_values(start), new
+
+
+def _linear_first(m2: Model, new: list, candidate: Candidate, linear_run, history: list, say):
+    """A linear effect recalibrated on the linear test first (its linear parameters then stay
+    out of the stepped sine's fit), or, without the test, fitted there with the linear ones.
+    Returns the model, the names to fit and the linear calibration's summary."""
+    linear_info = None
+    linear_params = m2.parameter_names(group="linear", calibrate=True)
+    if candidate.is_linear and linear_run is not None:
+        from analysis.calibration.linear import calibrate_linear
+
+        res = calibrate_linear(
+            m2, linear_run, parameters=tuple(linear_params), min_modes=min(4, len(linear_params))
+        )
+        m2 = res.model
+        linear_info = {"parameters": res.parameters, "cost": res.cost}
+        history.append(
+            {
+                "stage": "linear",
+                "iteration": res.nit,
+                "chi2_per_dof": float("nan"),
+                "parameters": res.parameters,
+            }
+        )
+        say("linear", {"cost": res.cost, "parameters": res.parameters})
+        new = [n for n in new if m2.parameters[n].group != "linear"]
+    elif candidate.is_linear:
+        new = list(dict.fromkeys([*new, *linear_params]))
+    return m2, new, linear_info

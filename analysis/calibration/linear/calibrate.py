@@ -282,61 +282,25 @@ def calibrate_linear(
     zetas = [z for z in st.zeta0_schedule if z > zeta0] + [zeta0]
     clusters = _mode_clusters(fit.n_modes, st.n_per_band, len(cal), st.use_phase)
     nominal = {n: model.parameters[n].nominal for n in names}
-    held: dict[str, dict[str, Any]] = {}
-    while True:
-        fitted = [n for n in names if n not in held]
-        sub = ParameterSpace.from_model(model_s, fitted)
-        base = model_s.with_values({n: nominal[n] for n in held})
-        lo_f, hi_f = sub.theta_bounds()
-        sol, stages = _continuation(
-            lambda z, base=base, sub=sub: objective(
-                cal, eq if z == zeta0 else equalize(fit, z, st.n_per_band), base, sub
-            ),
-            zetas,
-            np.clip(sub.to_theta([model.parameters[n].value for n in fitted]), lo_f, hi_f),
-            (lo_f, hi_f),
-            st,
-        )
-        cov_d, estimator = data_covariance(sol.jac, sol.fun, clusters)
-        new = {} if st.weak_parameters == "fit" else _first(decide_weak(model, sub, sol.x, cov_d))
-        if not new:
-            break
-        held.update(new)
-        if len(held) == len(names):
-            raise CalibrationError(
-                f"{run_frfs.source}: the test determines none of {names}: "
-                + "; ".join(f"{n}: {h['reason']}" for n, h in held.items())
-            )
-    precision = _prior_precision(model, fitted) if st.weak_parameters == "hold" else None
-    if precision is not None and precision.any():
-        # the fitted ones under their priors (MAP): the data's weight is the one its
-        # covariance estimator gives it, so the prior counts exactly as much as it should
-        data_weight = _data_weight(sol, cov_d)
-        target = sub.to_theta([nominal[n] for n in fitted])
-        sol = METHODS[st.method](
-            _WithPrior(objective(cal, eq, base, sub), target, precision, data_weight),
-            sol.x,
-            (lo_f, hi_f),
-            st.max_iterations,
-        )
-        sol.fun = sol.fun[: -len(fitted)]
-        sol.jac = sol.jac[: -len(fitted)]
-        stages.append(
-            {
-                "zeta0": zeta0,
-                "prior": True,
-                "cost": float(sol.cost),
-                "nit": int(sol.nit),
-                "nfev": int(sol.nfev),
-                "njev": int(sol.njev),
-                "success": bool(sol.success),
-                "message": sol.message,
-            }
-        )
-        cov_f = np.linalg.inv(np.linalg.inv(cov_d) + np.diag(precision))
-        estimator += "; combined with the model file's priors (MAP)"
-    else:
-        precision, cov_f = np.zeros(len(fitted)), cov_d
+    hf = _fit_determined(
+        model,
+        model_s,
+        names,
+        nominal,
+        objective,
+        cal,
+        eq,
+        fit,
+        zetas,
+        zeta0,
+        clusters,
+        st,
+        run_frfs.source,
+    )
+    sol, precision, cov_f, estimator = _under_priors(
+        model, hf, objective, cal, eq, nominal, zeta0, st
+    )
+    stages, held, fitted, sub, cov_d = hf.stages, hf.held, hf.fitted, hf.sub, hf.cov_d
     t_fit = time.perf_counter()
 
     values = {**sub.as_dict(sub.to_physical(sol.x)), **{n: nominal[n] for n in held}}
@@ -351,20 +315,9 @@ def calibrate_linear(
     modes_cal = modal_analysis(asm_cal.M, asm_cal.K)
     pairs = _pair_modes(modes_cal, fit, rows, band, st.mac_min)
     unidentified = _unidentified_modes(model_cal, asm_cal, modes_cal, names, pairs, band)
-    damping = DampingSpec(
-        default_zeta=model.damping.default_zeta,
-        per_mode={pr.model_mode: pr.zeta for pr in pairs if pr.model_mode is not None},
+    damping, out_model, zeta_std = _identified_damping(
+        model, model_cal, values, fit, pairs, masses, st
     )
-    zeta_std = {
-        pr.model_mode: float(fit.x_std[fit.n_modes + pr.test_index])
-        for pr in pairs
-        if pr.model_mode is not None and fit.x_std is not None
-    }
-    if st.keep_sensor_masses or not masses:
-        out_model = model_cal.with_damping(damping)
-    else:
-        out_model, numbers = _without_sensors(model.with_values(values), model_cal, damping)
-        zeta_std = {numbers[k]: v for k, v in zeta_std.items()}
 
     def deviations(x: np.ndarray, m_: Model) -> dict[str, Any]:
         return _deviations(every, x, m_, run_frfs.channels, f, H, f_max, cal, val)
@@ -416,13 +369,129 @@ def calibrate_linear(
     )
 
 
+@dataclass
+class _HeldFit:
+    """The fit of the parameters the test determines, the others held at their nominal values
+    (``held``: name -> status and reason)."""
+
+    sol: LeastSquaresResult
+    stages: list[dict]
+    cov_d: np.ndarray
+    estimator: str
+    held: dict[str, dict[str, Any]]
+    fitted: list[str]
+    sub: ParameterSpace
+    base: Model
+    bounds: tuple[np.ndarray, np.ndarray]
+
+
+def _fit_determined(
+    model: Model,
+    model_s: Model,
+    names,
+    nominal,
+    objective,
+    cal,
+    eq,
+    fit,
+    zetas,
+    zeta0,
+    clusters,
+    st,
+    source: str,
+) -> _HeldFit:
+    """Fit, hold the first parameter the test determines worse than its prior at its nominal
+    value, and fit again, until the test determines every one still fitted."""
+    held: dict[str, dict[str, Any]] = {}
+    while True:
+        fitted = [n for n in names if n not in held]
+        sub = ParameterSpace.from_model(model_s, fitted)
+        base = model_s.with_values({n: nominal[n] for n in held})
+        lo_f, hi_f = sub.theta_bounds()
+        sol, stages = _continuation(
+            lambda z, base=base, sub=sub: objective(
+                cal, eq if z == zeta0 else equalize(fit, z, st.n_per_band), base, sub
+            ),
+            zetas,
+            np.clip(sub.to_theta([model.parameters[n].value for n in fitted]), lo_f, hi_f),
+            (lo_f, hi_f),
+            st,
+        )
+        cov_d, estimator = data_covariance(sol.jac, sol.fun, clusters)
+        new = {} if st.weak_parameters == "fit" else _first(decide_weak(model, sub, sol.x, cov_d))
+        if not new:
+            return _HeldFit(sol, stages, cov_d, estimator, held, fitted, sub, base, (lo_f, hi_f))
+        held.update(new)
+        if len(held) == len(names):
+            raise CalibrationError(
+                f"{source}: the test determines none of {names}: "
+                + "; ".join(f"{n}: {h['reason']}" for n, h in held.items())
+            )
+
+
+def _under_priors(model: Model, hf: _HeldFit, objective, cal, eq, nominal, zeta0, st):
+    """The fitted parameters under their priors (maximum a posteriori) where the model file
+    gives them; returns the solution, the prior precision, the covariance and its
+    estimator's description."""
+    fitted, sub, sol = hf.fitted, hf.sub, hf.sol
+    precision = _prior_precision(model, fitted) if st.weak_parameters == "hold" else None
+    if precision is None or not precision.any():
+        return sol, np.zeros(len(fitted)), hf.cov_d, hf.estimator
+    # the data's weight is the one its covariance estimator gives it, so the prior counts
+    # exactly as much as it should
+    data_weight = _data_weight(sol, hf.cov_d)
+    target = sub.to_theta([nominal[n] for n in fitted])
+    sol = METHODS[st.method](
+        _WithPrior(objective(cal, eq, hf.base, sub), target, precision, data_weight),
+        sol.x,
+        hf.bounds,
+        st.max_iterations,
+    )
+    sol.fun = sol.fun[: -len(fitted)]
+    sol.jac = sol.jac[: -len(fitted)]
+    hf.stages.append(
+        {
+            "zeta0": zeta0,
+            "prior": True,
+            "cost": float(sol.cost),
+            "nit": int(sol.nit),
+            "nfev": int(sol.nfev),
+            "njev": int(sol.njev),
+            "success": bool(sol.success),
+            "message": sol.message,
+        }
+    )
+    cov_f = np.linalg.inv(np.linalg.inv(hf.cov_d) + np.diag(precision))
+    return sol, precision, cov_f, hf.estimator + "; combined with the model file's priors (MAP)"
+
+
+def _identified_damping(model: Model, model_cal: Model, values, fit, pairs, masses, st):
+    """The identified per-mode damping, the calibrated model with it (without the sensors'
+    masses unless kept) and the damping ratios' standard deviations by that model's modes."""
+    damping = DampingSpec(
+        default_zeta=model.damping.default_zeta,
+        per_mode={pr.model_mode: pr.zeta for pr in pairs if pr.model_mode is not None},
+    )
+    zeta_std = {
+        pr.model_mode: float(fit.x_std[fit.n_modes + pr.test_index])
+        for pr in pairs
+        if pr.model_mode is not None and fit.x_std is not None
+    }
+    if st.keep_sensor_masses or not masses:
+        out_model = model_cal.with_damping(damping)
+    else:
+        out_model, numbers = _without_sensors(model.with_values(values), model_cal, damping)
+        zeta_std = {numbers[k]: v for k, v in zeta_std.items()}
+    return damping, out_model, zeta_std
+
+
 # -- what the test determines -----------------------------------------------------------------
 def _mode_clusters(n_modes: int, n_per_band: int, n_channels: int, use_phase: bool) -> np.ndarray:
     """The (identified mode, channel) each calibration residual belongs to (residuals are
     ordered ``(metric frequency, channel)``, the metric frequencies mode by mode, then the
     phases, which share their magnitude's cluster)."""
-    per = np.arange(n_modes * n_channels).reshape(n_modes, 1, n_channels)
-    per = np.repeat(per, n_per_band, axis=1).ravel()
+    by_mode = np.arange(n_modes * n_channels).reshape(n_modes, 1, n_channels)
+    per = np.repeat(by_mode, n_per_band, axis=1).ravel()
     return np.concatenate([per, per]) if use_phase else per
 
 
