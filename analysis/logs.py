@@ -24,6 +24,7 @@ import multiprocessing
 import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 __all__ = [
     "INPUT_FILE_OPTIONS",
@@ -89,7 +90,7 @@ class StageCounts:
         self.kinds = tuple(kinds)
         self._patterns = [re.compile(k.pattern) for k in self.kinds]
         try:
-            self._n = multiprocessing.Array("q", len(self.kinds))
+            self._n: Any = multiprocessing.Array("q", len(self.kinds))
         except OSError:  # pragma: no cover - no shared memory here: count in this process
             self._n = [0] * len(self.kinds)
 

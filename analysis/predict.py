@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -179,8 +180,8 @@ class SteppedSinePredictor:
         if top > n_harmonics:
             self.settings["n_harmonics"] = top
         self.branch_tolerance = branch_tolerance
-        self._linear_key = None
-        self._linear = None
+        self._linear_key: Any = None
+        self._linear: Any = None
         #: Steps solved by stepping so far (every step of every pass, over all calls).
         self.steps_solved = 0
         #: Times each sweep (index among the needed ones) ended with a needed step unsolved:

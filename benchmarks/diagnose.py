@@ -42,6 +42,7 @@ import hashlib
 import json
 import logging
 import os
+import sys
 import time
 from fractions import Fraction
 from pathlib import Path
@@ -553,4 +554,4 @@ def run(quick: bool = False) -> dict:
 
 if __name__ == "__main__":
     logging.basicConfig(level=logging.WARNING)
-    print(json.dumps(run(quick="--quick" in os.sys.argv[1:])))
+    print(json.dumps(run(quick="--quick" in sys.argv[1:])))

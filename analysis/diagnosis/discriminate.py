@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -79,7 +80,7 @@ def discriminate(
                     orders=tuple(data.orders),
                 )
                 outputs[m_i, li, ri] = run_sweep(job)
-    rows = []
+    rows: list[dict[str, Any]] = []
     for li, lv in enumerate(levels):
         for ri, rg in enumerate(ranges):
             worst = None

@@ -174,7 +174,7 @@ def _resonance(cmp: Comparison, channel: int) -> list[Finding]:
 def _growth(cmp: Comparison, sigma: np.ndarray, gate: float) -> list[Finding]:
     """Median growth exponent of each order over the levels, measured and model."""
     levels = np.array(_levels(cmp))
-    out = []
+    out: list[Finding] = []
     if levels.size < 2:
         return out
     freqs = np.unique(np.round(cmp.frequency_hz, 6))
@@ -210,7 +210,7 @@ def _growth(cmp: Comparison, sigma: np.ndarray, gate: float) -> list[Finding]:
                 else ""
             )
         )
-        points = ()
+        points: tuple[str, ...] = ()
         if sig and order == "2":
             points = ("even",)
         elif sig and order == "3":

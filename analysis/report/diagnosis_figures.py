@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -30,7 +31,7 @@ __all__ = [
     "plot_sensor_order_level_map",
 ]
 
-_NORM = {"vmin": 0.5, "vmax": 300.0}
+_NORM: dict[str, Any] = {"vmin": 0.5, "vmax": 300.0}
 
 
 def _save(fig, path) -> Path:

@@ -20,10 +20,13 @@ import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rig.events import Event
 from rig.service.state import RunRecord, RunState, ServiceState
+
+if TYPE_CHECKING:
+    from rig.engine import RunEngine
 
 __all__ = ["RigOptions", "RigOwner"]
 
@@ -90,7 +93,7 @@ class RigOwner(threading.Thread):
         self.error: BaseException | None = None
         self._stopping = threading.Event()
         self._lock = threading.Lock()
-        self._engine = None
+        self._engine: RunEngine | None = None
         self._current: RunRecord | None = None
         self._pending_pause = False
         self._pending_abort = ""
