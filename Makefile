@@ -62,4 +62,4 @@ bench: setup
 	$(PY) -m benchmarks mhb
 
 clean:
-	rm -rf $(VENV) demo-output .pytest_cache
+	rm -rf $(VENV) demo-output .pytest_cache .mypy_cache

@@ -328,6 +328,7 @@ def _mutate_h5(f: h5py.File, rng: random.Random) -> str:
     return f"replace {where} by {new!r}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["stepped-sine", "random"])
 def test_fuzz_measurement_file(tmp_path, kind):
     base = tmp_path / "base.h5"

@@ -8,6 +8,8 @@ import sys
 import textwrap
 from concurrent.futures import ProcessPoolExecutor
 
+import pytest
+
 from analysis.logs import summarise_repeats
 
 MHB = logging.getLogger("analysis.mhb.sweep")
@@ -71,6 +73,7 @@ def test_forked_workers_count_into_the_stage(caplog) -> None:
     assert [r.getMessage().split(" MHB")[0] for r in caplog.records] == ["calibrate: 100"]
 
 
+@pytest.mark.slow
 def test_the_command_line_prints_one_line_and_every_step_with_debug(tmp_path) -> None:
     script = textwrap.dedent(
         """

@@ -63,6 +63,7 @@ def _calibrate(model, data, monkeypatch, early_exit: bool):
     return res, at_lhs["lhs"]
 
 
+@pytest.mark.slow
 def test_early_exit_keeps_every_start_cost_and_the_calibration(run, monkeypatch):
     model, data = run
     new, steps_new = _calibrate(model, data, monkeypatch, early_exit=True)
@@ -76,6 +77,7 @@ def test_early_exit_keeps_every_start_cost_and_the_calibration(run, monkeypatch)
     assert steps_new < steps_old
 
 
+@pytest.mark.slow
 def test_plain_predictor_stops_at_the_first_failed_fitted_step(run):
     model, data = run
     space = ParameterSpace.from_model(model, SETTINGS.parameters)

@@ -185,6 +185,7 @@ def _truth_frfs(data):
     return p.frf
 
 
+@pytest.mark.slow
 def test_frfs_agree_with_the_truths_mhb(tmp_path):
     """Acceptance: H^nu measured on the simulated rig against the truth's multi-harmonic
     balance driven by the measured force phasors, within the measurement's standard errors

@@ -63,6 +63,7 @@ def test_plans_lists_the_builtin_plans():
     assert "224 steps" in plans["paper"]["summary"] and plans["linear"]["kind"] == "random"
 
 
+@pytest.mark.slow
 def test_ni_backend_without_driver_points_to_sim(files, tmp_path):
     r = _rig("run", "quick", "--backend", "ni", "--out", tmp_path / "x.h5", "--lock-dir", tmp_path)
     if r.returncode == 0:  # pragma: no cover - a machine with NI-DAQmx and hardware
@@ -113,6 +114,7 @@ def _wait_for_step(proc, n, deadline_s=60.0):
     raise AssertionError(f"step {n} never reported: {''.join(lines)}")
 
 
+@pytest.mark.slow
 def test_sigkill_mid_run_leaves_a_file_that_resume_completes(files, tmp_path):
     out = tmp_path / "killed.h5"
     proc = _start(files, out)
@@ -133,6 +135,7 @@ def test_sigkill_mid_run_leaves_a_file_that_resume_completes(files, tmp_path):
     assert done.complete and sorted(done.plan_index) == list(range(22))
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_cleanly(files, tmp_path):
     out = tmp_path / "interrupted.h5"
     proc = _start(files, out)
@@ -146,6 +149,7 @@ def test_ctrl_c_stops_cleanly(files, tmp_path):
     assert "resume    python -m rig run --resume" in stdout
 
 
+@pytest.mark.slow
 def test_run_linear_and_export(files, tmp_path):
     out = tmp_path / "run.h5"
     r = _rig(
@@ -204,6 +208,7 @@ def test_top_level_help_lists_each_command_once():
     assert "{" not in text  # no {a,b,...} list of every command in the usage
 
 
+@pytest.mark.slow
 def test_an_existing_output_file_names_the_command_line_flag(tmp_path):
     """The library says overwrite=True; a command-line user reads --overwrite."""
     for command in ("run", "linear"):
@@ -232,6 +237,7 @@ def test_the_library_keeps_its_own_wording_and_the_cli_rephrases_each_kind(tmp_p
         assert msg == f"{out}: file exists (pass --overwrite to replace it)"
 
 
+@pytest.mark.slow
 def test_a_simulated_fault_switched_on_from_the_command_line(files, tmp_path):
     out = tmp_path / "fault.h5"
     r = _rig(
@@ -271,6 +277,7 @@ def test_a_simulated_fault_switched_on_from_the_command_line(files, tmp_path):
         ("acc7:read-timeout", "concerns the whole rig"),
     ],
 )
+@pytest.mark.slow
 def test_a_bad_fault_is_refused_with_the_syntax(files, tmp_path, spec, expected):
     r = _rig(
         "run",

@@ -11,6 +11,10 @@ TRUTH_GAP_M = 0.60e-3  # the reference truth's gap
 TRUTH_KC = 4.51e5
 
 
+# every test shares the whole workflow run (several minutes)
+pytestmark = pytest.mark.slow
+
+
 @pytest.fixture(scope="module")
 def workflow(tmp_path_factory):
     d = tmp_path_factory.mktemp("workflow")

@@ -30,6 +30,10 @@ FREQS = np.unique(
 )
 
 
+# the tests share calibrations made by module fixtures (tens of seconds each)
+pytestmark = pytest.mark.slow
+
+
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     path = tmp_path_factory.mktemp("cal") / "synthetic.h5"

@@ -42,12 +42,16 @@ def test_recovers_parameters_without_noise(clean_result) -> None:
     assert max(_errors(clean_result).values()) < 5e-3, _errors(clean_result)
 
 
+@pytest.mark.slow
 def test_recovers_parameters_with_noise(noisy_result) -> None:
     assert noisy_result.success
     assert max(_errors(noisy_result).values()) < 0.02, _errors(noisy_result)
 
 
-@pytest.mark.parametrize("which, tol", [("clean_result", 0.01), ("noisy_result", 0.10)])
+@pytest.mark.parametrize(
+    "which, tol",
+    [("clean_result", 0.01), pytest.param("noisy_result", 0.10, marks=pytest.mark.slow)],
+)
 def test_identified_damping_in_the_model(which: str, tol: float, request) -> None:
     result = request.getfixturevalue(which)
     per_mode = result.model.damping.per_mode
@@ -111,6 +115,7 @@ def test_a_test_that_determines_everything_says_nothing(noisy_result) -> None:
     assert noisy_result.identifiability_notes() == []
 
 
+@pytest.mark.slow
 def test_parameters_the_test_leaves_undetermined_are_named(tmp_path: Path) -> None:
     """4 % damping on the three mount modes (10.8, 11.2 and 15 Hz) merges them into one test
     mode: rho_corner, which acts mostly on them, is undetermined, and the two model modes
@@ -150,6 +155,7 @@ def test_parameters_the_test_leaves_undetermined_are_named(tmp_path: Path) -> No
     assert "held at its nominal value: rho_corner" in notes
 
 
+@pytest.mark.slow
 def test_a_parameter_that_runs_to_a_bound_is_held_not_passed_on(tmp_path: Path) -> None:
     """A frame stiffer than the model's range allows (E_frame 340 GPa, upper bound 300, as a
     file from a rig whose frame differs from the model's would ask): the fit runs E_frame to

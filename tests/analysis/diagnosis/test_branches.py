@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from analysis import predict_branches
 from analysis.diagnosis import BranchMatchedPredictor, compare
@@ -131,6 +132,7 @@ def _fold_run(path, model, force: np.ndarray) -> tuple[object, int]:
     return read_measurement(path), len(picks) - 2
 
 
+@pytest.mark.slow
 def test_a_step_held_past_the_fold_is_predicted_on_the_turned_back_branch(
     tmp_path, reference_model, monkeypatch
 ) -> None:

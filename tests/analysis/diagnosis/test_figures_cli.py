@@ -18,6 +18,7 @@ from analysis.report.diagnosis_figures import (
 )
 
 
+@pytest.mark.slow
 def test_figures_are_written(runs, reference_model, tmp_path) -> None:
     data = runs("two_sided_stop")
     cmp = compare(reference_model, data, predictor=BranchMatchedPredictor(reference_model, data))
@@ -39,6 +40,7 @@ def _run(argv, capsys):
     return out, capsys.readouterr()
 
 
+@pytest.mark.slow
 def test_compare_and_diagnose_commands(runs, reference_model, tmp_path, capsys) -> None:
     data = runs("reference")
     model_path = reference_model.save(tmp_path / "model.toml")

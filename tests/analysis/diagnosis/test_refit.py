@@ -121,6 +121,7 @@ def test_recomputing_the_weights_at_a_stall_scores_no_worse(runs, reference_mode
     assert _chi2_on(drop.model, data, rows) <= _chi2_on(once.model, data, rows) * (1 + 1e-6)
 
 
+@pytest.mark.slow
 def test_the_start_model_is_not_solved_again_to_rank_the_starts(
     runs, reference_model, monkeypatch
 ) -> None:
@@ -142,6 +143,7 @@ def test_the_start_model_is_not_solved_again_to_rank_the_starts(
     assert two.start_costs[1] > two.start_costs[0]  # the model's own k_c fits better
 
 
+@pytest.mark.slow
 def test_the_damping_derivative_is_that_of_solving_the_sweeps_again(runs, reference_model) -> None:
     """A modal damping ratio's derivative: each step solved at the shifted ratio from its own
     solution gives the forward difference of solving the whole sweeps again there (to 1e-5 of

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 from PySide6 import QtCore
 
 from analysis.measurement_file import read_measurement
@@ -86,6 +87,7 @@ def _next_file_is_new(acq, path) -> None:
     box.path.setText(str(path.with_name("quick-2.h5")))
 
 
+@pytest.mark.slow
 def test_pretest_then_a_whole_run_with_pause_and_resume(qtbot, lock_dir, tmp_path):
     window = make_window(qtbot, lock_dir)
     path = tmp_path / "quick.h5"
@@ -134,6 +136,7 @@ def test_pretest_then_a_whole_run_with_pause_and_resume(qtbot, lock_dir, tmp_pat
     screenshot(window, "acquisition-finished.png")
 
 
+@pytest.mark.slow
 def test_abort_then_browse_the_interrupted_file_and_complete_it(qtbot, lock_dir, tmp_path):
     window = make_window(qtbot, lock_dir)
     path = tmp_path / "aborted.h5"
@@ -170,6 +173,7 @@ def test_abort_then_browse_the_interrupted_file_and_complete_it(qtbot, lock_dir,
     assert browser.step_count() == 10 and "SUCCESS" in browser.header.text()
 
 
+@pytest.mark.slow
 def test_amplifier_status_overload_alarm_clear_and_resume(qtbot, lock_dir, tmp_path):
     model = AmplifierModel()
     model.enable()

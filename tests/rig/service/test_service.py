@@ -151,6 +151,7 @@ def test_bad_requests_are_refused_with_reasons(shared_service):
     assert client.runs() == before
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(60)
 def test_one_service_per_directory_and_one_owner_per_device(shared_service, bench, tmp_path):
     svc = shared_service
@@ -226,6 +227,7 @@ def _resume_completes(svc, client, run_a, run_b, held, n_aborted: int, data) -> 
     assert states[run_a] == states[run_b] == "success"
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(150)
 def test_paper_run_watched_by_three_paused_aborted_and_resumed(shared_service, procs, tmp_path):
     svc = shared_service
@@ -293,6 +295,7 @@ def test_paper_run_watched_by_three_paused_aborted_and_resumed(shared_service, p
     _resume_completes(svc, client, run_a, run_b, held, n_aborted, data)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(60)
 def test_submit_and_watch_from_the_command_line(shared_service):
     r = shared_service.cli("submit", "quick", "--watch", timeout=60)
@@ -314,6 +317,7 @@ def test_submit_and_watch_from_the_command_line(shared_service):
 # ------------------------------------------------------------------------ stop and restart
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(60)
 def test_start_detached_status_and_stop(procs, tmp_path, bench):
     sdir = tmp_path / "svc"
@@ -391,6 +395,7 @@ def _stopped_cleanly(svc, run_id):
     return data
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(150)
 def test_stop_and_kill_mid_run_then_restart_reports_and_resumes(service_factory):
     svc = service_factory().start()
