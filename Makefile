@@ -3,7 +3,10 @@
 #   make gui-deps  (as root, Debian/Ubuntu) the system packages the GUI needs: Qt's X11 (xcb)
 #                  plugin libraries, and Xvfb, xdotool, x11-utils and imagemagick, with which the
 #                  tests start the real GUI on a virtual display and take a screenshot
-#   make demo | test | lint | bench | clean
+#   make check     the fast tier: lint, format and type checks and the tests not marked slow or
+#                  hardware, on every core (under 2 minutes on a 2-core machine)
+#   make test      the same checks and the whole test suite (as CI runs it)
+#   make demo | lint | bench | clean
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
@@ -11,7 +14,7 @@ export OMP_NUM_THREADS ?= 1
 export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
-.PHONY: setup gui-deps demo test lint bench clean
+.PHONY: setup gui-deps demo check test lint bench clean
 
 # Qt's offscreen platform (the tests), its X11 platform (libqxcb.so: rig/gui/qt_check.py names
 # the same libraries when one is missing), a virtual X server and the tools to drive it.
@@ -42,17 +45,21 @@ gui-deps:
 demo: setup
 	$(PY) -m rig workflow --out demo-output
 
-test: setup
-	QT_QPA_PLATFORM=offscreen $(PY) -m pytest -q -n auto --dist worksteal
-	$(PY) -m ruff check .
-	$(PY) -m ruff format --check .
+PYTEST := QT_QPA_PLATFORM=offscreen $(PY) -m pytest -q -n auto --dist worksteal
 
 lint: setup
 	$(PY) -m ruff check .
 	$(PY) -m ruff format --check .
+	$(PY) -m mypy
+
+check: lint
+	$(PYTEST) -m "not slow and not hardware"
+
+test: lint
+	$(PYTEST)
 
 bench: setup
 	$(PY) -m benchmarks mhb
 
 clean:
-	rm -rf $(VENV) demo-output .pytest_cache
+	rm -rf $(VENV) demo-output .pytest_cache .mypy_cache

@@ -24,9 +24,18 @@ import multiprocessing
 import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from typing import Any
 
-__all__ = ["INPUT_FILE_OPTIONS", "MHB_NOT_CONVERGED", "Repeated", "StageCounts",
-           "add_debug_option", "configure_logging", "note_inputs", "summarise_repeats"]  # fmt: skip
+__all__ = [
+    "INPUT_FILE_OPTIONS",
+    "MHB_NOT_CONVERGED",
+    "Repeated",
+    "StageCounts",
+    "add_debug_option",
+    "configure_logging",
+    "note_inputs",
+    "summarise_repeats",
+]
 
 log = logging.getLogger("analysis")
 
@@ -81,7 +90,7 @@ class StageCounts:
         self.kinds = tuple(kinds)
         self._patterns = [re.compile(k.pattern) for k in self.kinds]
         try:
-            self._n = multiprocessing.Array("q", len(self.kinds))
+            self._n: Any = multiprocessing.Array("q", len(self.kinds))
         except OSError:  # pragma: no cover - no shared memory here: count in this process
             self._n = [0] * len(self.kinds)
 

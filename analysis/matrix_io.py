@@ -190,7 +190,9 @@ def export_linear(source: Any, path: str | Path, format: str | None = None) -> l
     path = Path(path)
     fmt = _infer_format(path, format)
     part = _as_part(source)
-    mats = {"M": part.M, "K": part.K} | ({"C": part.C} if part.C is not None else {})
+    mats: dict[str, Any] = {"M": part.M, "K": part.K} | (
+        {"C": part.C} if part.C is not None else {}
+    )
     labels = np.array([dof_label(*d) for d in part.dofs])
     names = [n for n in part.node_xy if any(n == d[0] for d in part.dofs)]
     xy = np.array([part.node_xy[n] for n in names], dtype=float).reshape(-1, 2)

@@ -285,14 +285,19 @@ class Model:
         if self.frame is not None:
             self._check_coefficients()
         index, node_xy = self._dof_map()
-        object.__setattr__(self, "points", {n: self._point(p, index, node_xy)
-                                            for n, p in sorted(self.points.items())})  # fmt: skip
+        object.__setattr__(
+            self,
+            "points",
+            {n: self._point(p, index, node_xy) for n, p in sorted(self.points.items())},
+        )
         names = [s.name for s in self.nonlinear]
         if dup := {n for n in names if names.count(n) > 1}:
             raise SpecError("nonlinear", f"duplicate element name(s) {sorted(dup)}")
-        object.__setattr__(self, "nonlinear", tuple(
-            self._check_spec(i, s, index) for i, s in enumerate(self.nonlinear)
-        ))  # fmt: skip
+        object.__setattr__(
+            self,
+            "nonlinear",
+            tuple(self._check_spec(i, s, index) for i, s in enumerate(self.nonlinear)),
+        )
 
     def _use(self, path: str, name: str, group: str) -> Parameter:
         if name not in self.parameters:
@@ -369,8 +374,9 @@ class Model:
                 self._use(f"{path}.params.{k}", v, "nonlinear")
             elif isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
                 raise SpecError(f"{path}.params.{k}", f"expected a number or a name, got {v!r}")
-        return dataclasses.replace(spec, at=at, to=to, params=dict(spec.params),
-                                   options=dict(spec.options))  # fmt: skip
+        return dataclasses.replace(
+            spec, at=at, to=to, params=dict(spec.params), options=dict(spec.options)
+        )
 
     @property
     def structure(self) -> LinearStructure | None:
@@ -456,9 +462,10 @@ class Model:
         for i, spec in enumerate(specs):
             if spec.kind not in ELEMENT_TYPES:
                 raise ModelFileError(
-                    self.source, f"nonlinear[{i}].kind",
+                    self.source,
+                    f"nonlinear[{i}].kind",
                     f"unknown element kind {spec.kind!r}; known: {sorted(ELEMENT_TYPES)}",
-                )  # fmt: skip
+                )
             kw = {k: values[v] if isinstance(v, str) else v for k, v in spec.params.items()}
             try:
                 out.append((spec, make_element(spec.kind, **kw, **spec.options)))

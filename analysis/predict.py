@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -73,8 +74,12 @@ class Prediction:
     def empty(cls, shape: tuple[int, int, int], params: Sequence[str]) -> Prediction:
         """NaN FRFs and derivatives of ``shape`` (steps, channels, orders), nothing converged,
         to be filled step by step."""
-        return cls(np.full(shape, np.nan + 0j), {p: np.full(shape, np.nan + 0j) for p in params},
-                   np.zeros(shape[0], dtype=bool), [])  # fmt: skip
+        return cls(
+            np.full(shape, np.nan + 0j),
+            {p: np.full(shape, np.nan + 0j) for p in params},
+            np.zeros(shape[0], dtype=bool),
+            [],
+        )
 
     def mark(self, row: int, point, frequency_hz: float) -> bool:
         """Record whether the solution ``point`` of step ``row`` converged (with its message
@@ -175,8 +180,8 @@ class SteppedSinePredictor:
         if top > n_harmonics:
             self.settings["n_harmonics"] = top
         self.branch_tolerance = branch_tolerance
-        self._linear_key = None
-        self._linear = None
+        self._linear_key: Any = None
+        self._linear: Any = None
         #: Steps solved by stepping so far (every step of every pass, over all calls).
         self.steps_solved = 0
         #: Times each sweep (index among the needed ones) ended with a needed step unsolved:
@@ -309,8 +314,19 @@ class SteppedSinePredictor:
         sweeps = [s for s in sweeps_of(d) if need[s].any()]
         order = self._sweep_order(sweeps) if stop_at_failure else range(len(sweeps))
         for i in order:
-            if self._predict_sweep(out, pb, sweeps[i], need, params, orders, sign, power,
-                                   H_meas, k_frf, stop_at_failure):  # fmt: skip
+            if self._predict_sweep(
+                out,
+                pb,
+                sweeps[i],
+                need,
+                params,
+                orders,
+                sign,
+                power,
+                H_meas,
+                k_frf,
+                stop_at_failure,
+            ):
                 self._failed_sweeps[i] = self._failed_sweeps.get(i, 0) + 1
                 if stop_at_failure:
                     left = int((need & ~out.converged).sum())
@@ -318,8 +334,9 @@ class SteppedSinePredictor:
                     break
         return out
 
-    def _predict_sweep(self, out, pb, sweep, need, params, orders, sign, power, H_meas, k_frf,
-                       stop_at_failure) -> bool:  # fmt: skip
+    def _predict_sweep(
+        self, out, pb, sweep, need, params, orders, sign, power, H_meas, k_frf, stop_at_failure
+    ) -> bool:
         """Fill ``out`` with the steps of ``sweep`` (up to its last needed one); whether a
         needed step failed (the sweep then ends there with ``stop_at_failure``)."""
         d = self.data

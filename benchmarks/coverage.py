@@ -71,8 +71,18 @@ def make_runs(truth: str, seed: int) -> tuple[Path, Path, float]:
     shutil.rmtree(folder, ignore_errors=True)
     folder.mkdir(parents=True)
     t0 = time.perf_counter()
-    common = ["--backend", "sim", "--truth", truth, "--seed", str(seed), "--quiet",
-              "--overwrite", "--lock-dir", str(folder / "locks")]  # fmt: skip
+    common = [
+        "--backend",
+        "sim",
+        "--truth",
+        truth,
+        "--seed",
+        str(seed),
+        "--quiet",
+        "--overwrite",
+        "--lock-dir",
+        str(folder / "locks"),
+    ]
     _rig(["linear", "linear", "--out", str(lin), *common], folder / "rig.log")
     _rig(["run", "paper", "--out", str(paper), *common], folder / "rig.log")
     done.write_text("")
@@ -101,8 +111,20 @@ def make_all(quick: bool = False) -> dict[tuple[str, int], tuple[Path, Path, flo
 
 def _reference(truth: str, seed: int, path: Path) -> Path:
     """The truth's values as the workflow writes them (``rig reference``)."""
-    _rig(["reference", "--truth", truth, "--seed", str(seed), "--out", str(path),
-          "--overwrite", "--json"], path.with_suffix(".log"))  # fmt: skip
+    _rig(
+        [
+            "reference",
+            "--truth",
+            truth,
+            "--seed",
+            str(seed),
+            "--out",
+            str(path),
+            "--overwrite",
+            "--json",
+        ],
+        path.with_suffix(".log"),
+    )
     return path
 
 
@@ -116,8 +138,14 @@ def analyse(case: tuple[str, int], runs, folder: Path) -> dict:
     ref = _reference(truth, seed, out / "truth.json")
     lin, paper, _ = runs
     t0 = time.perf_counter()
-    summary = analyse_runs(out, lin, paper, quiet=True, reference=ref,
-                           title=f"the {truth!r} simulated rig, seed {seed}")  # fmt: skip
+    summary = analyse_runs(
+        out,
+        lin,
+        paper,
+        quiet=True,
+        reference=ref,
+        title=f"the {truth!r} simulated rig, seed {seed}",
+    )
     held = list(summary["linear"].get("held", {}))
     text = (out / "summary.md").read_text()
     stages = {st["stage"]: st["seconds"] for st in summary["stages"]}
@@ -190,8 +218,10 @@ def run(quick: bool = False) -> dict:
                 failed[c] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
     for (t, s), r in sorted(results.items()):
         z = {k: row["z"] for k, row in r["comparison"].items()}
-        print(f"{t} seed {s}: misfit {r['misfit']}, held {r['held']}, z "
-              + ", ".join(f"{k} {v:+.2f}" for k, v in z.items() if v is not None))  # fmt: skip
+        print(
+            f"{t} seed {s}: misfit {r['misfit']}, held {r['held']}, z "
+            + ", ".join(f"{k} {v:+.2f}" for k, v in z.items() if v is not None)
+        )
     figures = _figures(results, failed)
     figures["data_s"] = round(data_s, 1)
     figures["total_s"] = round(time.perf_counter() - t0, 1)

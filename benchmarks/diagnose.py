@@ -42,6 +42,7 @@ import hashlib
 import json
 import logging
 import os
+import sys
 import time
 from fractions import Fraction
 from pathlib import Path
@@ -127,8 +128,9 @@ def benchmark_plan(quick: bool = False, blocks: int | None = None):
         changes["acquisition"] = dataclasses.replace(plan.acquisition, record_blocks=blocks)
     if quick:
         fr = plan.frequencies
-        ranges = tuple(dataclasses.replace(r, step_hz=0.2) if r.step_hz < 1 else r
-                       for r in fr.ranges)  # fmt: skip
+        ranges = tuple(
+            dataclasses.replace(r, step_hz=0.2) if r.step_hz < 1 else r for r in fr.ranges
+        )
         changes["frequencies"] = dataclasses.replace(fr, ranges=ranges)
     return dataclasses.replace(plan, **changes)
 
@@ -204,10 +206,10 @@ def stepped_run(truth: str, folder: Path, *, quick: bool = False, seed: int = 0)
     for n in quiet:
         logging.getLogger(n).setLevel(logging.CRITICAL)
     try:
-        with open_rig("sim", setup, backend_options={"truth": truth, "seed": seed},
-                      lock_dir=folder / "locks") as rig:  # fmt: skip
-            run = TestRun(rig.backend, plan, setup, path, amplifier=rig.amplifier,
-                          overwrite=True)  # fmt: skip
+        with open_rig(
+            "sim", setup, backend_options={"truth": truth, "seed": seed}, lock_dir=folder / "locks"
+        ) as rig:
+            run = TestRun(rig.backend, plan, setup, path, amplifier=rig.amplifier, overwrite=True)
             summary = run.execute()
     finally:
         for n, level in quiet.items():
@@ -273,9 +275,20 @@ def simulate_linear_test(
     rows = []
     for p in range(1, 14):
         direction = "x" if p in POSTS else "y"
-        chans.append(ChannelInfo(f"acc{p}", p, direction, "acceleration", "m/s^2", 100.0,
-                                 "mV/g", "drive-acceleration" if p == 3 else "response",
-                                 masses[p], f"A{p}"))  # fmt: skip
+        chans.append(
+            ChannelInfo(
+                f"acc{p}",
+                p,
+                direction,
+                "acceleration",
+                "m/s^2",
+                100.0,
+                "mV/g",
+                "drive-acceleration" if p == 3 else "response",
+                masses[p],
+                f"A{p}",
+            )
+        )
         rows.append(asm.point_dof(p, direction))
     e = np.zeros(asm.n_dofs)
     e[drive] = 1.0
@@ -287,13 +300,26 @@ def simulate_linear_test(
     rng = np.random.default_rng(seed)
     z = rng.standard_normal((freq.size, 13)) + 1j * rng.standard_normal((freq.size, 13))
     h1[:, 1:] *= 1 + noise / np.sqrt(2) * z
-    frf = RandomFRF(frequency_hz=freq, h1=h1, coherence=np.full(h1.shape, 1 / (1 + noise**2)),
-                    force_psd=np.full(freq.size, 0.09 / (band_hz[1] - band_hz[0])),
-                    n_averages=8, window="boxcar", overlap=0.0, fs_hz=2560.0,
-                    rms_force_n=0.3)  # fmt: skip
-    return write_random(path, channels=chans, actuator=Actuator(3, "y"), frf=frf,
-                        config={"simulated": truth_name, "plan": "linear"},
-                        setup={"backend": "truth linearised"}, overwrite=True)  # fmt: skip
+    frf = RandomFRF(
+        frequency_hz=freq,
+        h1=h1,
+        coherence=np.full(h1.shape, 1 / (1 + noise**2)),
+        force_psd=np.full(freq.size, 0.09 / (band_hz[1] - band_hz[0])),
+        n_averages=8,
+        window="boxcar",
+        overlap=0.0,
+        fs_hz=2560.0,
+        rms_force_n=0.3,
+    )
+    return write_random(
+        path,
+        channels=chans,
+        actuator=Actuator(3, "y"),
+        frf=frf,
+        config={"simulated": truth_name, "plan": "linear"},
+        setup={"backend": "truth linearised"},
+        overwrite=True,
+    )
 
 
 def simulate_stepped_sine(
@@ -321,22 +347,43 @@ def simulate_stepped_sine(
     masses = {p: (s.impedance_head_mass_kg if p == 3 else s.accelerometer_mass_kg) for p in points}
     model = truth.model.add_masses(masses)
     asm = model.assemble()
-    pb = build_problem_dofs(model, [asm.point_dof(3)], [asm.point_dof(p) for p in points],
-                            n_harmonics=n_harmonics, n_time=n_time)  # fmt: skip
+    pb = build_problem_dofs(
+        model,
+        [asm.point_dof(3)],
+        [asm.point_dof(p) for p in points],
+        n_harmonics=n_harmonics,
+        n_time=n_time,
+    )
     chans = [ChannelInfo("force3", 3, "y", "force", "N", 22.5, "mV/N", "drive-force", 0.0, "IH")]
     chans += [
-        ChannelInfo(f"acc{p}", p, "y", "acceleration", "m/s^2", 100.0, "mV/g",
-                    "drive-acceleration" if p == 3 else "response", masses[p], f"A{p}")
+        ChannelInfo(
+            f"acc{p}",
+            p,
+            "y",
+            "acceleration",
+            "m/s^2",
+            100.0,
+            "mV/g",
+            "drive-acceleration" if p == 3 else "response",
+            masses[p],
+            f"A{p}",
+        )
         for p in points
-    ]  # fmt: skip
+    ]
     rng = np.random.default_rng(seed)
     targets = np.array([[lv, 0.02 * lv, 0.02 * lv] for lv in levels_n], complex)
     writer = create_stepped_sine(
-        path, channels=chans, actuator=Actuator(3, "y"), levels_n=list(levels_n),
-        orders_num=[1, 2, 3], orders_den=[1, 1, 1], force_targets=targets,
+        path,
+        channels=chans,
+        actuator=Actuator(3, "y"),
+        levels_n=list(levels_n),
+        orders_num=[1, 2, 3],
+        orders_den=[1, 1, 1],
+        force_targets=targets,
         config={"simulated": str(truth_name), "plan": "paper"},
-        setup={"backend": "truth MHB"}, overwrite=True,
-    )  # fmt: skip
+        setup={"backend": "truth MHB"},
+        overwrite=True,
+    )
     k = np.arange(1, 4)
     newton = NewtonSettings(rtol=1e-9, max_iterations=80, stall_window=20)
     plan = 0
@@ -358,13 +405,24 @@ def simulate_stepped_sine(
                 std[1:] = truth.noise.acceleration_ms2_per_rthz * root
                 noise = rng.standard_normal(std.shape) + 1j * rng.standard_normal(std.shape)
                 meas = resp + std / np.sqrt(2) * noise
-                writer.append_step(StepRecord(
-                    plan_index=plan, level_index=li, sweep_direction=1,
-                    frequency_target_hz=float(f[j]), frequency_hz=float(f[j]), force=meas[0],
-                    force_std=std[0], response=meas, response_std=std, drive=0.1 * F[j],
-                    n_blocks=record_periods, control_iterations=2, control_converged=True,
-                    control_error=float(np.max(np.abs(F[j] - targets[li])) / lv),
-                ))  # fmt: skip
+                writer.append_step(
+                    StepRecord(
+                        plan_index=plan,
+                        level_index=li,
+                        sweep_direction=1,
+                        frequency_target_hz=float(f[j]),
+                        frequency_hz=float(f[j]),
+                        force=meas[0],
+                        force_std=std[0],
+                        response=meas,
+                        response_std=std,
+                        drive=0.1 * F[j],
+                        n_blocks=record_periods,
+                        control_iterations=2,
+                        control_converged=True,
+                        control_error=float(np.max(np.abs(F[j] - targets[li])) / lv),
+                    )
+                )
                 plan += 1
         writer.finish("success", "simulated from the truth")
     return Path(path)
@@ -381,9 +439,15 @@ def calibrate_paper_way(stepped: Path, linear: Path, *, n_starts: int = 30, seed
     data = read_measurement(stepped)
     levels = sorted(float(x) for x in data.levels_n)
     rows = fitted_rows(data, levels[:-1] if len(levels) >= 3 else levels)
-    fit = refit(lin, data, ("k_c", "gap", "v_c"), rows=rows,
-                distributions=paper_distributions(lin.parameters["gap"].nominal),
-                n_random_starts=n_starts, seed=seed)  # fmt: skip
+    fit = refit(
+        lin,
+        data,
+        ("k_c", "gap", "v_c"),
+        rows=rows,
+        distributions=paper_distributions(lin.parameters["gap"].nominal),
+        n_random_starts=n_starts,
+        seed=seed,
+    )
     return fit.model, data
 
 
@@ -433,13 +497,23 @@ def run_case(truth: str, folder: Path, *, quick: bool = False, seed: int = 0) ->
         pick = diag.group[0] if diag.group else (diag.ranking[0] if diag.ranking else None)
         if pick is not None:
             values, known = pick.start_values()
-            res = augment(model, data, pick.candidate, values=values, known=known,
-                          linear_run=linear, out=folder / f"{truth}_augmented.toml",
-                          seed=seed)  # fmt: skip
+            res = augment(
+                model,
+                data,
+                pick.candidate,
+                values=values,
+                known=known,
+                linear_run=linear,
+                out=folder / f"{truth}_augmented.toml",
+                seed=seed,
+            )
             print(res.summary())
-            out.update(added=pick.candidate.label, residual_drop=res.residual_drop,
-                       final_over_noise=res.after.rms_over_noise,
-                       augment_s=round(res.seconds, 1))  # fmt: skip
+            out.update(
+                added=pick.candidate.label,
+                residual_drop=res.residual_drop,
+                final_over_noise=res.after.rms_over_noise,
+                augment_s=round(res.seconds, 1),
+            )
         else:
             out.update(residual_drop=1.0, final_over_noise=diag.comparison.rms_over_noise)
     out["total_s"] = round(time.perf_counter() - t0, 1)
@@ -456,8 +530,12 @@ def run(quick: bool = False) -> dict:
         r = run_case(truth, folder, quick=quick)
         details.append(r)
         if truth in TRUE_EFFECTS:
-            cases.append({k: r[k] for k in ("truth", "true_effect_rank", "residual_drop",
-                                             "final_over_noise")})  # fmt: skip
+            cases.append(
+                {
+                    k: r[k]
+                    for k in ("truth", "true_effect_rank", "residual_drop", "final_over_noise")
+                }
+            )
         else:
             claims += int(r["verdict"] == "explained")
     return {
@@ -476,4 +554,4 @@ def run(quick: bool = False) -> dict:
 
 if __name__ == "__main__":
     logging.basicConfig(level=logging.WARNING)
-    print(json.dumps(run(quick="--quick" in os.sys.argv[1:])))
+    print(json.dumps(run(quick="--quick" in sys.argv[1:])))

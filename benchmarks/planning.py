@@ -79,10 +79,20 @@ def run(quick: bool = False) -> dict:
         figures["paper_choice_kc_gap_mac_refined"] = round(paper.refined.pair(i, j), 4)
     print()
     print(f"{'figure':<34}{'value':>12}")
-    for key in ("planning_s", "n_configurations", "n_identifiable", "n_sweeps", "n_steps",
-                "kc_gap_mac_1hz", "kc_gap_mac_refined", "kc_gap_mac_frf_1hz",
-                "kc_gap_mac_frf_refined", "paper_choice_rank", "paper_choice_kc_gap_mac_1hz",
-                "paper_choice_kc_gap_mac_refined"):  # fmt: skip
+    for key in (
+        "planning_s",
+        "n_configurations",
+        "n_identifiable",
+        "n_sweeps",
+        "n_steps",
+        "kc_gap_mac_1hz",
+        "kc_gap_mac_refined",
+        "kc_gap_mac_frf_1hz",
+        "kc_gap_mac_frf_refined",
+        "paper_choice_rank",
+        "paper_choice_kc_gap_mac_1hz",
+        "paper_choice_kc_gap_mac_refined",
+    ):
         if key in figures:
             v = figures[key]
             print(f"{key:<34}{v if v is not None else '-':>12}")

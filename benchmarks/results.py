@@ -28,8 +28,13 @@ def machine() -> dict:
                 break
     except OSError:
         pass
-    return {"cpus": os.cpu_count(), "cpu": cpu, "python": platform.python_version(),
-            "numpy": np.__version__, "blas_threads": os.environ.get("OMP_NUM_THREADS")}  # fmt: skip
+    return {
+        "cpus": os.cpu_count(),
+        "cpu": cpu,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "blas_threads": os.environ.get("OMP_NUM_THREADS"),
+    }
 
 
 def code_version() -> str:
@@ -38,23 +43,42 @@ def code_version() -> str:
 
     root = Path(__file__).resolve().parent.parent
     try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, text=True,
-                              capture_output=True, check=True).stdout.strip()  # fmt: skip
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                               cwd=root, text=True, capture_output=True).stdout.strip()  # fmt: skip
+        head = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            cwd=root,
+            text=True,
+            capture_output=True,
+            check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=root,
+            text=True,
+            capture_output=True,
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
     return head + ("+changes" if dirty else "")
 
 
-def record(name: str, figures: dict, folder: Path = FOLDER, markdown: Path = MARKDOWN,
-           code: str | None = None) -> Path:  # fmt: skip
+def record(
+    name: str,
+    figures: dict,
+    folder: Path = FOLDER,
+    markdown: Path = MARKDOWN,
+    code: str | None = None,
+) -> Path:
     """Write one benchmark's figures and make ``RESULTS.md`` again; ``code``: the commit the
     figures were measured on (default: the work tree's, as the run ends)."""
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{name}.json"
-    doc = {"benchmark": name, "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-           "code": code or code_version(), "machine": machine(), "figures": figures}  # fmt: skip
+    doc = {
+        "benchmark": name,
+        "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+        "code": code or code_version(),
+        "machine": machine(),
+        "figures": figures,
+    }
     path.write_text(json.dumps(doc, indent=1, default=str) + "\n")
     write_markdown(folder, markdown)
     return path
@@ -70,9 +94,13 @@ def _cell(value) -> str:
 def write_markdown(folder: Path = FOLDER, markdown: Path = MARKDOWN) -> Path:
     """``RESULTS.md`` from every recorded benchmark: its date, machine and top-level figures
     (the per-case details stay in the JSON)."""
-    lines = ["# Benchmark results", "",
-             "Written by `python -m benchmarks NAME` from `benchmarks/results/NAME.json` (the "
-             "last full run of each); not edited by hand.", ""]  # fmt: skip
+    lines = [
+        "# Benchmark results",
+        "",
+        "Written by `python -m benchmarks NAME` from `benchmarks/results/NAME.json` (the "
+        "last full run of each); not edited by hand.",
+        "",
+    ]
     for path in sorted(folder.glob("*.json")):
         doc = json.loads(path.read_text())
         m = doc.get("machine", {})

@@ -133,11 +133,27 @@ def _start_service(work: Path, setup_file: Path) -> tuple[subprocess.Popen, Path
     sdir = work / "service"
     log = open(work / "service.log", "w")  # noqa: SIM115 - the child writes to it
     proc = subprocess.Popen(
-        [sys.executable, "-m", "rig", "service", "start", "--backend", "sim",
-         "--setup", str(setup_file), "--service-dir", str(sdir), "--port", "0",
-         "--lock-dir", str(work / "locks")],
-        stdout=log, stderr=subprocess.STDOUT, env=_env(),
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "rig",
+            "service",
+            "start",
+            "--backend",
+            "sim",
+            "--setup",
+            str(setup_file),
+            "--service-dir",
+            str(sdir),
+            "--port",
+            "0",
+            "--lock-dir",
+            str(work / "locks"),
+        ],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        env=_env(),
+    )
     log.close()
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
@@ -176,7 +192,7 @@ def _clients(sdir: Path, label: str, n_watch: int, n_poll: int, timeout_s: float
                     stdout=subprocess.PIPE,
                     text=True,
                     env=_env(),
-                )  # fmt: skip
+                )
             )
     for proc in procs:  # every client has connected before the run is submitted
         line = proc.stdout.readline()

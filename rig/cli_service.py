@@ -382,18 +382,8 @@ def _client_options(sp: argparse.ArgumentParser) -> None:
     sp.add_argument("--json", action="store_true", help="print JSON")
 
 
-def add_service_commands(sub) -> None:
-    """Add ``service``, ``submit``, ``list``, ``watch``, ``pause``, ``resume``, ``abort`` and
-    ``result`` to the ``rig`` parser's subcommands."""
-    sp = sub.add_parser(
-        "service",
-        help="the acquisition service: one process owns the rig (start, stop, status)",
-        description="Start, stop or query the acquisition service: a process that owns the rig "
-        "(device lock, backend, amplifier), runs queued plans one at a time and serves an "
-        "HTTP API on the loopback address (docs/service-api.md). 'start' stays in the "
-        "foreground unless --detach; SIGTERM or Ctrl-C stop it cleanly.",
-    )
-    ssub = sp.add_subparsers(dest="service_command", required=True)
+def _add_service_subcommands(ssub) -> None:
+    """``service start``, ``service stop`` and ``service status``."""
     st = ssub.add_parser("start", help="start the service")
     st.add_argument("--backend", choices=("sim", "ni"), default="sim", help="DAQ backend")
     st.add_argument("--setup", default="reference", help="lab setup: built-in name or TOML file")
@@ -420,6 +410,20 @@ def add_service_commands(sub) -> None:
     ss = ssub.add_parser("status", help="is it running, what runs, what is queued")
     _client_options(ss)
     ss.set_defaults(func=cmd_service_status)
+
+
+def add_service_commands(sub) -> None:
+    """Add ``service``, ``submit``, ``list``, ``watch``, ``pause``, ``resume``, ``abort`` and
+    ``result`` to the ``rig`` parser's subcommands."""
+    sp = sub.add_parser(
+        "service",
+        help="the acquisition service: one process owns the rig (start, stop, status)",
+        description="Start, stop or query the acquisition service: a process that owns the rig "
+        "(device lock, backend, amplifier), runs queued plans one at a time and serves an "
+        "HTTP API on the loopback address (docs/service-api.md). 'start' stays in the "
+        "foreground unless --detach; SIGTERM or Ctrl-C stop it cleanly.",
+    )
+    _add_service_subcommands(sp.add_subparsers(dest="service_command", required=True))
 
     sp = sub.add_parser("submit", help="queue a plan on the acquisition service")
     sp.add_argument("plan", help="built-in plan name or plan file")

@@ -23,6 +23,7 @@ import math
 from collections.abc import Generator, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
+from typing import Any
 
 import numpy as np
 
@@ -138,7 +139,7 @@ def stepped_pretest(
     orders: Sequence[Fraction],
     frequency_hz: float,
     ramp_s: float = 0.05,
-) -> Generator[object, object, PretestReport]:
+) -> Generator[object, Any, PretestReport]:
     """Noise floor and loop check for a stepped-sine test (``yield from`` it in a procedure).
 
     Parameters

@@ -27,6 +27,7 @@ import math
 import time
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -122,7 +123,7 @@ class SimulatedDaq:
         self._out: list[np.ndarray] = []
         self._stop_ramp_s = float(stop_ramp_s)
         self._substeps = time_substeps or (4 if mode == "time" else 1)
-        self._config = None
+        self._config: Any = None
         self._rate = math.nan
         self.rig: RigModel | None = None
         self.simulation: RigSimulation | None = None

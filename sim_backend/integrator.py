@@ -98,9 +98,12 @@ class TimeStepper:
     """
 
     def __init__(
-        self, space: ModalStateSpace, problem: HarmonicProblem, sample_rate_hz: float,
+        self,
+        space: ModalStateSpace,
+        problem: HarmonicProblem,
+        sample_rate_hz: float,
         substeps: int = 1,
-    ) -> None:  # fmt: skip
+    ) -> None:
         if substeps < 1:
             raise ValueError(f"substeps: must be >= 1, got {substeps}")
         self.space = space

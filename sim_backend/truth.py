@@ -46,9 +46,15 @@ logger = logging.getLogger(__name__)
 
 TRUTH_DIR = Path(__file__).parent / "truths"
 _TRUTH_KEYS = {
-    "description", "hidden_effect", "seed", "drive_point", "noise", "shaker", "amplifier",
+    "description",
+    "hidden_effect",
+    "seed",
+    "drive_point",
+    "noise",
+    "shaker",
+    "amplifier",
     "sensors",
-}  # fmt: skip
+}
 
 
 def _positive_fields(obj: object, owner: str, allow_zero: bool) -> None:

@@ -33,10 +33,34 @@ N_CASES = 1000
 
 # -- mutating parsed TOML documents ------------------------------------------------------------
 _ODD_VALUES: list[Any] = [
-    math.nan, math.inf, -math.inf, 1e308, -1e308, 10**30, -(10**30), -1, -1.0, 0, 0.0, 1e-320,
-    True, False, "", "bogus", "nan", " ", "\u00e9\u00b2", [], [1, 2], ["a"], {}, {"x": 1},
-    2**63 - 1, 3.5, 7,
-]  # fmt: skip
+    math.nan,
+    math.inf,
+    -math.inf,
+    1e308,
+    -1e308,
+    10**30,
+    -(10**30),
+    -1,
+    -1.0,
+    0,
+    0.0,
+    1e-320,
+    True,
+    False,
+    "",
+    "bogus",
+    "nan",
+    " ",
+    "\u00e9\u00b2",
+    [],
+    [1, 2],
+    ["a"],
+    {},
+    {"x": 1},
+    2**63 - 1,
+    3.5,
+    7,
+]
 
 
 def _paths(doc: Any, prefix: tuple = ()) -> list[tuple]:
@@ -243,11 +267,25 @@ def _objects(f: h5py.File) -> list[tuple[str, str | None]]:
 
 
 _ODD_ARRAYS: list[Any] = [
-    np.float64(np.nan), np.array([np.inf, 1.0]), np.array([[1, 2], [3, 4]]), np.zeros(0),
-    np.array([-1, -5]), np.int64(-1), np.int64(2**62), np.float64(1e308), "bogus",
-    np.array(["a", "b"], dtype=h5py.string_dtype()), np.bool_(True), np.array([1 + 2j]),
-    np.float32(3.5), b"\xff\xfe", "{not json", '{"a": NaN}', "[]", "{}",
-]  # fmt: skip
+    np.float64(np.nan),
+    np.array([np.inf, 1.0]),
+    np.array([[1, 2], [3, 4]]),
+    np.zeros(0),
+    np.array([-1, -5]),
+    np.int64(-1),
+    np.int64(2**62),
+    np.float64(1e308),
+    "bogus",
+    np.array(["a", "b"], dtype=h5py.string_dtype()),
+    np.bool_(True),
+    np.array([1 + 2j]),
+    np.float32(3.5),
+    b"\xff\xfe",
+    "{not json",
+    '{"a": NaN}',
+    "[]",
+    "{}",
+]
 
 
 def _mutate_h5(f: h5py.File, rng: random.Random) -> str:
@@ -290,6 +328,7 @@ def _mutate_h5(f: h5py.File, rng: random.Random) -> str:
     return f"replace {where} by {new!r}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["stepped-sine", "random"])
 def test_fuzz_measurement_file(tmp_path, kind):
     base = tmp_path / "base.h5"

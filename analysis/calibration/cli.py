@@ -125,8 +125,10 @@ def _held_refined(res) -> dict:
         return {}
     sd = np.sqrt(np.diag(res.cov_joint))
     index = {n: i for i, n in enumerate(res.joint_names)}
-    return {n: {"value": v, "std": float(sd[index[n]]), "start": res.held.values.get(n)}
-            for n, v in res.held_posterior.items()}  # fmt: skip
+    return {
+        n: {"value": v, "std": float(sd[index[n]]), "start": res.held.values.get(n)}
+        for n, v in res.held_posterior.items()
+    }
 
 
 def _write_crossval(cv, out: Path) -> Path:
@@ -142,8 +144,9 @@ def _print_result(res, model) -> None:
     print("calibrated parameters (1 sigma: noise, misfit and held values together):")
     for n, v in res.parameters.items():
         unit = model.parameters[n].unit
-        print(f"  {n:10s} {v:12.5g} +- {res.std[n]:.3g} {unit}  "
-              f"(noise alone {res.std_noise[n]:.3g})")  # fmt: skip
+        print(
+            f"  {n:10s} {v:12.5g} +- {res.std[n]:.3g} {unit}  (noise alone {res.std_noise[n]:.3g})"
+        )
     for n, parts in res.contributions().items():
         top = sorted(parts.items(), key=lambda kv: -kv[1])[:3]
         print(f"    {n}: largest sources " + ", ".join(f"{k} {v:.3g}" for k, v in top))
@@ -154,8 +157,10 @@ def _print_result(res, model) -> None:
         for note in res.held.notes:
             print(f"    note: {note}")
     for why in res.misfit:
-        print(f"  MISFIT: {why}: the intervals are not to be trusted; `analysis diagnose` looks "
-              "for the missing effect")  # fmt: skip
+        print(
+            f"  MISFIT: {why}: the intervals are not to be trusted; `analysis diagnose` looks "
+            "for the missing effect"
+        )
 
 
 def _crossval_into(res, model, data, executor, out: Path, reporter: ProgressReporter):
@@ -213,7 +218,7 @@ def cmd_calibrate(args) -> dict:
         "std_noise": res.std_noise,
         "interval_95": {
             n: [v - 1.96 * res.std[n], v + 1.96 * res.std[n]] for n, v in res.parameters.items()
-        },  # fmt: skip
+        },
         "chi2_per_dof": res.chi2_per_dof,
         "misfit": res.misfit,
         "held": None if held is None else held.source,

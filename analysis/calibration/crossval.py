@@ -125,9 +125,10 @@ class CrossValidation:
                 continue
             if ratio < low:
                 why = (
-                    f"{len(self.stuck)} fold(s) did not move" if self.stuck
+                    f"{len(self.stuck)} fold(s) did not move"
+                    if self.stuck
                     else "the file's uncertainties may overstate the noise"
-                )  # fmt: skip
+                )
                 out.append(f"{name}: the folds scatter {ratio:.2f} x FIM^-1 (below {low:g}): {why}")
                 continue
             text = f"{name}: the folds scatter {ratio:.2f} x more than FIM^-1 predicts"
@@ -248,8 +249,10 @@ def cross_validate(
         log.warning(
             "cross-validation: %d of %d folds could not leave the calibrated optimum (%s): "
             "the standard deviations understate the uncertainty",
-            len(stuck), len(out), ", ".join(stuck[:4]) + (" ..." if len(stuck) > 4 else ""),
-        )  # fmt: skip
+            len(stuck),
+            len(out),
+            ", ".join(stuck[:4]) + (" ..." if len(stuck) > 4 else ""),
+        )
     fold_chi2, fold_p, share = _fold_diagnostics(
         FRFObjective(pred, space, base, st.weighting), x0, masks
     )
@@ -280,8 +283,10 @@ def _fold_diagnostics(obj: FRFObjective, x: np.ndarray, masks):
     K = len(masks)
     r, J = obj(x)
     if J is None or not np.all(np.isfinite(r)):
-        log.warning("cross-validation: the calibrated model did not converge on every step; "
-                    "no fold diagnostics")  # fmt: skip
+        log.warning(
+            "cross-validation: the calibrated model did not converge on every step; "
+            "no fold diagnostics"
+        )
         return None, None, None
     label = np.full(obj.mask.shape, -1)
     for j, (rows, c) in enumerate(masks):

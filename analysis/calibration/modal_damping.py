@@ -110,8 +110,9 @@ def damped_space(model: Model, names) -> ParameterSpace:
     zetas = [n for n in names if n.startswith(ZETA)]
     if not zetas:
         return sp
-    z = np.array([model.damping.per_mode.get(int(n[len(ZETA):]), model.damping.default_zeta)
-                  for n in zetas])  # fmt: skip
+    z = np.array(
+        [model.damping.per_mode.get(int(n[len(ZETA) :]), model.damping.default_zeta) for n in zetas]
+    )
     order = list(names)
     allv = {
         "log": dict(zip(plain, sp.log, strict=True)) | {n: True for n in zetas},
@@ -121,6 +122,8 @@ def damped_space(model: Model, names) -> ParameterSpace:
     }
     return ParameterSpace(
         names=tuple(order),
-        **{k: np.array([v[n] for n in order], dtype=bool if k == "log" else float)
-           for k, v in allv.items()},
-    )  # fmt: skip
+        **{
+            k: np.array([v[n] for n in order], dtype=bool if k == "log" else float)
+            for k, v in allv.items()
+        },
+    )

@@ -69,11 +69,13 @@ class FRFObjective:
         if weighting == "uncertainty" and data is not None:
             # refused, not floored nor silently unweighted (see check_standard_errors)
             check_standard_errors(
-                data, list(getattr(predictor, "channel_names", [])) or [str(c) for c in range(C)],
-                np.where(m[:, :, None], H, np.nan), std,
+                data,
+                list(getattr(predictor, "channel_names", [])) or [str(c) for c in range(C)],
+                np.where(m[:, :, None], H, np.nan),
+                std,
                 remedy="calibrate with --identity (W = I, the paper's metric) to fit without "
                 "them, or give the file its standard errors",
-            )  # fmt: skip
+            )
         if weighting == "identity":
             self.sigma = np.ones_like(std)
             self._weight = np.ones_like(std)

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from analysis.model import Model
 
@@ -60,7 +61,7 @@ class ParameterSpace:
     def size(self) -> int:
         return len(self.names)
 
-    def to_theta(self, p: np.ndarray) -> np.ndarray:
+    def to_theta(self, p: npt.ArrayLike) -> np.ndarray:
         """Scaled coordinates of physical values, shape (n,)."""
         p = np.asarray(p, dtype=float)
         return np.where(self.log, np.log(np.abs(p) / np.abs(self.nominal)), p / self.nominal)

@@ -133,8 +133,14 @@ IDENTIFIED_DAMPING_REL_FLOOR = 0.02
 UNIDENTIFIED_DAMPING_LOG_STD = 1.0
 
 
-def _with_damping(model: Model, names: list[str], cov: np.ndarray, modes: Iterable[int],
-                  rel_std: Mapping[int, float], notes: list[str]):  # fmt: skip
+def _with_damping(
+    model: Model,
+    names: list[str],
+    cov: np.ndarray,
+    modes: Iterable[int],
+    rel_std: Mapping[int, float],
+    notes: list[str],
+):
     """``names``/``cov`` with the modal damping ratios of ``modes`` appended, independent of
     the rest: an identified one (in ``rel_std``) with its relative standard deviation, at
     least :data:`IDENTIFIED_DAMPING_REL_FLOOR`; one the linear test did not identify with
@@ -227,9 +233,11 @@ def held_from_priors(model: Model) -> HeldParameters | None:
         values={n: model.parameters[n].value for n in names},
         cov=np.diag(var),
         source="the model file's priors (prior_rel_std)",
-        notes=("no linear calibration result given: the linear parameters' priors stand in for "
-               "their calibrated uncertainty; modal damping held as exact",),
-    )  # fmt: skip
+        notes=(
+            "no linear calibration result given: the linear parameters' priors stand in for "
+            "their calibrated uncertainty; modal damping held as exact",
+        ),
+    )
 
 
 def damping_modes_in_band(
@@ -289,17 +297,23 @@ def propagate_held(
     held : HeldParameters
     """
     pred0 = objective.predictor
-    pred = DampedPredictor(model, pred0.data, channels=pred0.channel_names,
-                           n_harmonics=pred0.settings["n_harmonics"],
-                           n_time=pred0.settings["n_time"])  # fmt: skip
+    pred = DampedPredictor(
+        model,
+        pred0.data,
+        channels=pred0.channel_names,
+        n_harmonics=pred0.settings["n_harmonics"],
+        n_time=pred0.settings["n_time"],
+    )
     space_b = damped_space(model, held.names)
     obj_b = FRFObjective(pred, space_b, objective.mask, objective.weighting)
     obj_b.sigma, obj_b._weight = objective.sigma, objective._weight
     theta_b = space_b.to_theta([held.values[n] for n in held.names])
     r, Jb = obj_b(theta_b, True)
     if Jb is None or not np.all(np.isfinite(Jb)):
-        raise RuntimeError("the calibrated model did not converge at every step: the held "
-                           "values' uncertainty cannot be carried")  # fmt: skip
+        raise RuntimeError(
+            "the calibrated model did not converge at every step: the held "
+            "values' uncertainty cannot be carried"
+        )
     sa = objective.space
     Ja = jac / sa.dp_dtheta(theta)[None, :]  # per unit of each physical value
     Jb = Jb / space_b.dp_dtheta(theta_b)[None, :]

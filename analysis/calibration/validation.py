@@ -102,8 +102,9 @@ def validate(
     names, C = calibration.joint_covariance()
     base = calibration.conditioned(model)
     if len(names) > calibration.space.size:  # the held values' uncertainty reaches the bands
-        pred = DampedPredictor(base, data, channels=st.channels, n_harmonics=st.n_harmonics,
-                               n_time=st.n_time)  # fmt: skip
+        pred = DampedPredictor(
+            base, data, channels=st.channels, n_harmonics=st.n_harmonics, n_time=st.n_time
+        )
         if not st.match_branches:
             log.info("validation: the bands use the branch-matched prediction")
     else:

@@ -45,8 +45,7 @@ from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 from analysis.predict_branches import BranchMatchedPredictor
 
-__all__ = ["TRUNCATION_SHARE", "AugmentResult", "augment", "finer_balance",
-           "truncation_over_noise"]  # fmt: skip
+__all__ = ["TRUNCATION_SHARE", "AugmentResult", "augment", "finer_balance", "truncation_over_noise"]
 
 log = logging.getLogger(__name__)
 
@@ -133,9 +132,12 @@ class AugmentResult:
             lines.append(
                 f"balance: {b['checked_harmonics']} harmonics truncate "
                 f"{b['truncation_over_noise']:.2g} x noise "
-                + (f"at the fitted values; fitted on at {b['n_harmonics']} harmonics"
-                   if b.get("refined") else "(kept)")
-            )  # fmt: skip
+                + (
+                    f"at the fitted values; fitted on at {b['n_harmonics']} harmonics"
+                    if b.get("refined")
+                    else "(kept)"
+                )
+            )
         lines.append("error history (chi2/dof on the fitted steps):")
         for h in self.history:
             lines.append(f"  {h['stage']:>10} {h['iteration']:3d}  {h['chi2_per_dof']:.4g}")
@@ -251,38 +253,22 @@ def augment(
         )
         values, known = dict(fit.values), dict(fit.known) if known is None else known
         say("screen", {"values": values, "known": known})
-    m2, new = candidate.apply(model, dict(values))
-    if candidate.law.kind == "parameter":
-        m2 = m2.with_values({candidate.parameter: values[candidate.parameter]})
-    start = {}
-    for n, v in (known or {}).items():
-        if n in m2.parameters:
-            p = m2.parameters[n]
-            start[n] = float(np.clip(v, p.lower, p.upper))
-    m2 = m2.with_values(start)
+    m2, new = _with_candidate(model, candidate, values, known)
     base_rows = fitted_rows(data, _calibration_levels(data, validation_level_n))
     z = np.abs(before.residual[base_rows]) ** 2
-    history: list[dict] = [{"stage": "model", "iteration": 0,
-                            "chi2_per_dof": float(np.nanmean(z)), "parameters": {}}]  # fmt: skip
-    linear_info = None
-    linear_params = m2.parameter_names(group="linear", calibrate=True)
-    if candidate.is_linear and linear_run is not None:
-        from analysis.calibration.linear import calibrate_linear
-
-        res = calibrate_linear(m2, linear_run, parameters=tuple(linear_params),
-                               min_modes=min(4, len(linear_params)))  # fmt: skip
-        m2 = res.model
-        linear_info = {"parameters": res.parameters, "cost": res.cost}
-        history.append({"stage": "linear", "iteration": res.nit, "chi2_per_dof": float("nan"),
-                        "parameters": res.parameters})  # fmt: skip
-        say("linear", {"cost": res.cost, "parameters": res.parameters})
-        new = [n for n in new if m2.parameters[n].group != "linear"]
-    elif candidate.is_linear:
-        new = list(dict.fromkeys([*new, *linear_params]))
-    names = list(dict.fromkeys([
-        *new, *model.parameter_names(group="nonlinear", calibrate=True),
-        *damping_parameters(candidate, m2, data),
-    ]))  # fmt: skip
+    history: list[dict] = [
+        {"stage": "model", "iteration": 0, "chi2_per_dof": float(np.nanmean(z)), "parameters": {}}
+    ]
+    m2, new, linear_info = _linear_first(m2, new, candidate, linear_run, history, say)
+    names = list(
+        dict.fromkeys(
+            [
+                *new,
+                *model.parameter_names(group="nonlinear", calibrate=True),
+                *damping_parameters(candidate, m2, data),
+            ]
+        )
+    )
     levels = _calibration_levels(data, validation_level_n)
     rows = fitted_rows(data, levels)
 
@@ -291,18 +277,29 @@ def augment(
             say("lm", info)
 
     r = refit(
-        m2, data, names, rows=rows,
+        m2,
+        data,
+        names,
+        rows=rows,
         distributions=start_distributions(m2, [n for n in names if not n.startswith("zeta_")], {})
         | {n: Distribution("loguniform", 0.002, 0.05) for n in names if n.startswith("zeta_")},
         n_random_starts=n_starts,
-        n_lm_starts=2 if n_starts else 1, seed=seed, max_iterations=max_iterations,
-        progress=report, n_harmonics=n_harmonics, n_time=n_time,
+        n_lm_starts=2 if n_starts else 1,
+        seed=seed,
+        max_iterations=max_iterations,
+        progress=report,
+        n_harmonics=n_harmonics,
+        n_time=n_time,
         reweight_passes=reweight_passes,
-    )  # fmt: skip
+    )
     history += [{"stage": "reweighted" if h.get("pass") else "lm", **h} for h in r.history]
     after = compare(r.model, data, predictor=_predictor(r.model, data, n_harmonics, n_time))
-    balance = {"n_harmonics": n_harmonics, "n_time": n_time,
-               "truncation_over_noise": float("nan"), "refined": False}  # fmt: skip
+    balance = {
+        "n_harmonics": n_harmonics,
+        "n_time": n_time,
+        "truncation_over_noise": float("nan"),
+        "refined": False,
+    }
     if check_balance:
         nh, nt = finer_balance(n_harmonics, n_time)
         fine = compare(r.model, data, predictor=_predictor(r.model, data, nh, nt))
@@ -310,20 +307,83 @@ def augment(
         balance.update(truncation_over_noise=t, checked_harmonics=n_harmonics)
         say("balance", {"n_harmonics": n_harmonics, "truncation_over_noise": t})
         if t >= TRUNCATION_SHARE:
-            r2 = refit(r.model, data, names, rows=rows, max_iterations=max_iterations,
-                       progress=report, n_harmonics=nh, n_time=nt,
-                       reweight_passes=reweight_passes)  # fmt: skip
-            history += [{**h, "stage": "finer balance"} for h in r2.history]
-            r = r2
+            r = refit(
+                r.model,
+                data,
+                names,
+                rows=rows,
+                max_iterations=max_iterations,
+                progress=report,
+                n_harmonics=nh,
+                n_time=nt,
+                reweight_passes=reweight_passes,
+            )
+            history += [{**h, "stage": "finer balance"} for h in r.history]
             before = compare(model, data, predictor=_predictor(model, data, nh, nt))
             after = compare(r.model, data, predictor=_predictor(r.model, data, nh, nt))
             balance.update(n_harmonics=nh, n_time=nt, refined=True)
     params = {**(linear_info["parameters"] if linear_info else {}), **r.parameters}
-    result = AugmentResult(candidate, r.model, before, after, params, history, levels,
-                           linear_info, seconds=time.perf_counter() - t0,
-                           balance=balance)  # fmt: skip
+    result = AugmentResult(
+        candidate,
+        r.model,
+        before,
+        after,
+        params,
+        history,
+        levels,
+        linear_info,
+        seconds=time.perf_counter() - t0,
+        balance=balance,
+    )
     if out is not None:
         result.save(out)
-    log.info("augmented with %s: %.3g -> %.3g x noise", candidate.label,
-             before.rms_over_noise, after.rms_over_noise)  # fmt: skip
+    log.info(
+        "augmented with %s: %.3g -> %.3g x noise",
+        candidate.label,
+        before.rms_over_noise,
+        after.rms_over_noise,
+    )
     return result
+
+
+def _with_candidate(model: Model, candidate: Candidate, values, known):
+    """The model with the candidate at ``values`` and its own nonlinear parameters at
+    ``known`` (within their bounds); also the candidate's new parameter names."""
+    m2, new = candidate.apply(model, dict(values))
+    if candidate.law.kind == "parameter":
+        m2 = m2.with_values({candidate.parameter: values[candidate.parameter]})
+    start = {}
+    for n, v in (known or {}).items():
+        if n in m2.parameters:
+            p = m2.parameters[n]
+            start[n] = float(np.clip(v, p.lower, p.upper))
+    return m2.with_values(start), new
+
+
+def _linear_first(m2: Model, new: list, candidate: Candidate, linear_run, history: list, say):
+    """A linear effect recalibrated on the linear test first (its linear parameters then stay
+    out of the stepped sine's fit), or, without the test, fitted there with the linear ones.
+    Returns the model, the names to fit and the linear calibration's summary."""
+    linear_info = None
+    linear_params = m2.parameter_names(group="linear", calibrate=True)
+    if candidate.is_linear and linear_run is not None:
+        from analysis.calibration.linear import calibrate_linear
+
+        res = calibrate_linear(
+            m2, linear_run, parameters=tuple(linear_params), min_modes=min(4, len(linear_params))
+        )
+        m2 = res.model
+        linear_info = {"parameters": res.parameters, "cost": res.cost}
+        history.append(
+            {
+                "stage": "linear",
+                "iteration": res.nit,
+                "chi2_per_dof": float("nan"),
+                "parameters": res.parameters,
+            }
+        )
+        say("linear", {"cost": res.cost, "parameters": res.parameters})
+        new = [n for n in new if m2.parameters[n].group != "linear"]
+    elif candidate.is_linear:
+        new = list(dict.fromkeys([*new, *linear_params]))
+    return m2, new, linear_info

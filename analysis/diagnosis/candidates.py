@@ -283,11 +283,16 @@ def release_joint(
         else:
             raise ValueError(f"model has no joint {jname!r}")
         doc["parameters"][name] = {
-            "value": value, "nominal": value, "lower": 1e-6 * value, "upper": 1e6 * value,
-            "calibrate": True, "scaling": "log",
-            "unit": "N/m" if direction != "rz" else "N m/rad", "group": "linear",
+            "value": value,
+            "nominal": value,
+            "lower": 1e-6 * value,
+            "upper": 1e6 * value,
+            "calibrate": True,
+            "scaling": "log",
+            "unit": "N/m" if direction != "rz" else "N m/rad",
+            "group": "linear",
             "description": f"stiffness of joint {jname} in {direction} ({label})",
-        }  # fmt: skip
+        }
 
     return _edit(model, edit)
 

@@ -58,8 +58,10 @@ def _progress(quiet: bool):
                 print(f"[{t:6.1f} s] {stage} {info['index'] + 1}/{info['n']}", file=sys.stderr)
             return
         if stage == "lm" and "iteration" in info and "cost" in info:
-            print(f"[{t:6.1f} s] LM iteration {info['iteration']}: metric {info['cost']:.6g}",
-                  file=sys.stderr)  # fmt: skip
+            print(
+                f"[{t:6.1f} s] LM iteration {info['iteration']}: metric {info['cost']:.6g}",
+                file=sys.stderr,
+            )
             return
         text = ", ".join(f"{k} {_value(v)}" for k, v in info.items() if not isinstance(v, list))
         print(f"[{t:6.1f} s] {stage}: {text}", file=sys.stderr)
@@ -114,9 +116,13 @@ def cmd_compare(args) -> dict:
 
 
 def _settings(args) -> DiagnosisSettings:
-    return DiagnosisSettings(workers=args.workers, n_starts=args.starts,
-                             n_harmonics=args.harmonics, n_time=args.samples,
-                             rescreen_ratio=args.rescreen_ratio)  # fmt: skip
+    return DiagnosisSettings(
+        workers=args.workers,
+        n_starts=args.starts,
+        n_harmonics=args.harmonics,
+        n_time=args.samples,
+        rescreen_ratio=args.rescreen_ratio,
+    )
 
 
 def cmd_diagnose(args) -> dict:
@@ -124,8 +130,13 @@ def cmd_diagnose(args) -> dict:
     model, data = _model(args), _stepped(args.run)
     _note_uncalibrated(model)
     with summarise_repeats("diagnose"):
-        result = diagnose(model, data, linear_run=args.linear_run, settings=_settings(args),
-                          progress=_progress(args.json))  # fmt: skip
+        result = diagnose(
+            model,
+            data,
+            linear_run=args.linear_run,
+            settings=_settings(args),
+            progress=_progress(args.json),
+        )
     if args.figures:
         from analysis.report.diagnosis_figures import plot_diagnosis
 
@@ -150,8 +161,9 @@ def cmd_augment(args) -> dict:
         cand = matches[0]
     else:
         with summarise_repeats("diagnose"):
-            diag = diagnose(model, data, linear_run=args.linear_run, settings=_settings(args),
-                            progress=show)  # fmt: skip
+            diag = diagnose(
+                model, data, linear_run=args.linear_run, settings=_settings(args), progress=show
+            )
         if diag.verdict != "explained":
             raise RuntimeError(
                 f"the diagnosis claims nothing to add (verdict: {diag.verdict}); name a "
@@ -162,17 +174,28 @@ def cmd_augment(args) -> dict:
         values, known = best.start_values()
         show("chosen", {"candidate": cand.label})
     with summarise_repeats("augment"):
-        result = augment(model, data, cand, values=values, known=known,
-                         linear_run=args.linear_run, n_starts=args.starts,
-                         reweight_passes=args.reweight, out=args.out, progress=show,
-                         n_harmonics=args.harmonics, n_time=args.samples)  # fmt: skip
+        result = augment(
+            model,
+            data,
+            cand,
+            values=values,
+            known=known,
+            linear_run=args.linear_run,
+            n_starts=args.starts,
+            reweight_passes=args.reweight,
+            out=args.out,
+            progress=show,
+            n_harmonics=args.harmonics,
+            n_time=args.samples,
+        )
     if args.figures:
         from analysis.report.diagnosis_figures import plot_before_after, plot_error_history
 
         out = Path(args.figures)
         out.mkdir(parents=True, exist_ok=True)
-        plot_before_after(result.before, result.after, out / "before_after.png",
-                          title=f"added: {cand.label}")  # fmt: skip
+        plot_before_after(
+            result.before, result.after, out / "before_after.png", title=f"added: {cand.label}"
+        )
         plot_error_history(result.history, out / "error_history.png", title=cand.label)
     if not args.json:
         print(result.summary())
@@ -194,19 +217,25 @@ def add_parsers(subparsers) -> None:
     sp = subparsers.add_parser("compare", help="residual maps of a model against a file")
     common(sp)
     sp.add_argument("--top", type=int, default=8, help="failing blocks listed")
-    sp.add_argument("--sigma", choices=("model", "file"), default="model",
-                    help="standard errors: the force's carried through the model (default) "
-                    "or the file's first-order FRF errors")  # fmt: skip
+    sp.add_argument(
+        "--sigma",
+        choices=("model", "file"),
+        default="model",
+        help="standard errors: the force's carried through the model (default) "
+        "or the file's first-order FRF errors",
+    )
     sp.set_defaults(func=cmd_compare)
 
     def rescreen(sp) -> None:
         sp.add_argument(
-            "--rescreen-ratio", type=float, default=DiagnosisSettings.rescreen_ratio,
+            "--rescreen-ratio",
+            type=float,
+            default=DiagnosisSettings.rescreen_ratio,
             metavar="R",
             help="screen again from the model with its own parameters recalibrated when that "
             f"brings the residual to R of the model's or below (default "
             f"{DiagnosisSettings.rescreen_ratio}; 0: never)",
-        )  # fmt: skip
+        )
 
     sp = subparsers.add_parser("diagnose", help="which physical effect the model misses")
     common(sp)

@@ -118,9 +118,12 @@ class Comparison:
         lines = [
             f"chi2/dof {self.chi2_per_dof:.3g} (rms residual / noise "
             f"{self.rms_over_noise:.3g}) over {np.isfinite(self.residual).sum()} FRF values"
-            + (f" ({self.left_out.size} step(s) not converged under force control left out)"
-               if self.left_out.size else "")
-        ]  # fmt: skip
+            + (
+                f" ({self.left_out.size} step(s) not converged under force control left out)"
+                if self.left_out.size
+                else ""
+            )
+        ]
         fails = self.failing()
         if not fails:
             lines.append("every block is consistent with the noise: the model is adequate here")
@@ -229,9 +232,13 @@ def compare(
     H, s = pred.measured()
     scored = np.ones(data.n_steps, bool) if include_unconverged else data.control_converged
     check_standard_errors(
-        data, pred.channel_names, H, s, rows=scored,
+        data,
+        pred.channel_names,
+        H,
+        s,
+        rows=scored,
         remedy="the file's standard errors are needed to score a model in units of the noise",
-    )  # fmt: skip
+    )
     positive = s[np.isfinite(s) & (s > 0)]
     floor = positive.min() if positive.size else 1.0  # only NaN errors (unscored) left to fill
     if isinstance(pred, BranchMatchedPredictor) and sigma == "model":

@@ -88,8 +88,9 @@ def _linear_steps(pred: BranchMatchedPredictor) -> np.ndarray:
     return out
 
 
-def _run_verifications(ex, jobs: list[VerifyJob], essential: int, enough, workers: int,
-                       follow=None, started=()) -> tuple[dict, dict]:  # fmt: skip
+def _run_verifications(
+    ex, jobs: list[VerifyJob], essential: int, enough, workers: int, follow=None, started=()
+) -> tuple[dict, dict]:
     """Run verification jobs (on ``ex``, at most ``workers`` at a time, or in this process)
     in order; the jobs after the first ``essential`` start one at a time once the jobs before
     them are in, and are dropped once ``enough`` of the results so far holds (so which run
@@ -156,8 +157,7 @@ class _Later:
 
 
 def _screen_from(model: Model, data, st: DiagnosisSettings, pred=None) -> Screen:
-    pred = pred or BranchMatchedPredictor(model, data, n_harmonics=st.n_harmonics,
-                                          n_time=st.n_time)  # fmt: skip
+    pred = pred or BranchMatchedPredictor(model, data, n_harmonics=st.n_harmonics, n_time=st.n_time)
     return Screen(model, data, predictor=pred)
 
 
@@ -241,13 +241,25 @@ def _shortlist(
             # each family's best apart from the picks so far (a contact-like law in a joint
             # can lead and belong to one family while the evidence also points at another)
             kinds = FAMILIES.get(fam, ())
-            picks.append(next((f for f in by_bic if f.candidate.law.kind in kinds and all(
-                f.candidate != g.candidate for g in picks if g is not None)), None))  # fmt: skip
+            picks.append(
+                next(
+                    (
+                        f
+                        for f in by_bic
+                        if f.candidate.law.kind in kinds
+                        and all(f.candidate != g.candidate for g in picks if g is not None)
+                    ),
+                    None,
+                )
+            )
         for f in picks:
             # only where the class explains a fair share of what the best candidate does
             gain = screen_gain(f)
-            if (f is not None and gain >= class_share * best_gain
-                    and all(f.candidate != g.candidate for g in first + classes)):  # fmt: skip
+            if (
+                f is not None
+                and gain >= class_share * best_gain
+                and all(f.candidate != g.candidate for g in first + classes)
+            ):
                 classes.append(f)
     first[n_lead:n_lead] = sorted(classes, key=lambda f: f.bic)
     second: list[ScreenFit] = []
@@ -259,8 +271,14 @@ def _shortlist(
             second.append(f)
     for fam in evidence.families:
         fam_kinds = FAMILIES.get(fam, ())
-        best = next((f for f in nonlinear if f.candidate.law.kind in fam_kinds
-                     and f.candidate.location.kind == "point"), None)  # fmt: skip
+        best = next(
+            (
+                f
+                for f in nonlinear
+                if f.candidate.law.kind in fam_kinds and f.candidate.location.kind == "point"
+            ),
+            None,
+        )
         if best is not None and all(best.candidate != g.candidate for g in first + second):
             second.append(best)
     return first, second[:4]
@@ -269,8 +287,14 @@ def _shortlist(
 def _other_points(fits: list[ScreenFit], cand: Candidate, done) -> list[ScreenFit]:
     """Screened fits of ``cand``'s law at the other measured points, best first, leaving out
     the candidates in ``done``."""
-    return [f for f in fits if f.candidate.law == cand.law and f.candidate.location.kind == "point"
-            and f.candidate.location != cand.location and f.candidate not in done]  # fmt: skip
+    return [
+        f
+        for f in fits
+        if f.candidate.law == cand.law
+        and f.candidate.location.kind == "point"
+        and f.candidate.location != cand.location
+        and f.candidate not in done
+    ]
 
 
 def _walk_jobs(best, fits: list[ScreenFit], tried, n: int):
@@ -305,8 +329,9 @@ def _promising(v: Verified, refit: Verified, st: DiagnosisSettings) -> bool:
     return v.rms_over_noise() <= st.restart_fraction * refit.rms_over_noise()
 
 
-def _to_continue(done: list[Verified], refit: Verified, st: DiagnosisSettings,
-                 time_left: bool, continued=()) -> list[int]:  # fmt: skip
+def _to_continue(
+    done: list[Verified], refit: Verified, st: DiagnosisSettings, time_left: bool, continued=()
+) -> list[int]:
     """The verifications that go on from where they stopped: at most two (best first) with
     those in ``continued`` (gone on already, as soon as they finished: :func:`_goes_on_at_once`).
 
@@ -317,9 +342,16 @@ def _to_continue(done: list[Verified], refit: Verified, st: DiagnosisSettings,
     reaches: the start model's tangents can stall a fit above the noise near a jump (the
     clamp's friction at 3.4 x the noise's chi-square, 1.16 one iteration after reweighting).
     """
-    going = [i for i, v in enumerate(done) if i not in continued and not v.failed and (
-        _promising(v, refit, st) or (v.stopped and v.last_decrease() >= st.continue_decrease
-                                     and time_left))]  # fmt: skip
+    going = [
+        i
+        for i, v in enumerate(done)
+        if i not in continued
+        and not v.failed
+        and (
+            _promising(v, refit, st)
+            or (v.stopped and v.last_decrease() >= st.continue_decrease and time_left)
+        )
+    ]
     return sorted(going, key=lambda i: done[i].chi2_per_dof())[: max(2 - len(continued), 0)]
 
 
@@ -340,14 +372,20 @@ def _merge(done: list[Verified], i: int, v: Verified) -> None:
         done[i] = v
 
 
-def _other_laws(screen: Screen, fits: list[ScreenFit], cand: Candidate, tried,
-                n: int) -> list[ScreenFit]:  # fmt: skip
+def _other_laws(
+    screen: Screen, fits: list[ScreenFit], cand: Candidate, tried, n: int
+) -> list[ScreenFit]:
     """Other laws at ``cand``'s location (a group of springs, a joint), refined: of the next
     ``n + 1`` by BIC, the ``n`` simplest. Look-alike laws there screen alike (the mounts'
     cubic hardening ranked fourth behind a contact, a two-sided gap and a gap spring, all
     stiffening), and on a tie the simpler law is preferred."""
-    there = [screen.refined(f) for f in fits if f.candidate.location == cand.location
-             and f.candidate.law != cand.law and f.candidate not in tried]  # fmt: skip
+    there = [
+        screen.refined(f)
+        for f in fits
+        if f.candidate.location == cand.location
+        and f.candidate.law != cand.law
+        and f.candidate not in tried
+    ]
     near = sorted(there, key=lambda f: f.bic)[: n + 1]
     return sorted(near, key=lambda f: (f.candidate.n_params, f.bic))[:n]
 
@@ -357,11 +395,90 @@ def _linear_shortlist(base: LinearFit | None, fits: list[LinearFit], st: Diagnos
     misfit (the best, and those tied with it)."""
     if base is None or base.failed:
         return []
-    good = [f for f in fits if not f.failed and f.delta_bic < -st.linear_bic
-            and f.cost <= st.linear_ratio * base.cost]  # fmt: skip
+    good = [
+        f
+        for f in fits
+        if not f.failed and f.delta_bic < -st.linear_bic and f.cost <= st.linear_ratio * base.cost
+    ]
     if not good:
         return []
     return [f for f in good if f.bic - good[0].bic <= st.tie_bic][:2]
+
+
+@dataclasses.dataclass
+class _Jobs:
+    """What every verification job of one diagnosis shares. ``text`` is the model the
+    verifications start from: the recalibrated one once the screen ran again from it."""
+
+    text: str
+    source: str
+    path: str
+    linear_run: str | None
+    st: DiagnosisSettings
+
+    def verify(
+        self, cand, values=None, known=None, start_toml=None, n_starts=0, seed=0
+    ) -> VerifyJob:
+        st = self.st
+        return VerifyJob(
+            self.text,
+            self.source,
+            self.path,
+            None,
+            cand,
+            dict(values or {}),
+            dict(known or {}),
+            self.linear_run,
+            st.verify_iterations,
+            n_starts,
+            seed,
+            start_toml,
+            st.n_harmonics,
+            st.n_time,
+            st.verify_seconds,
+            reweight_drop=st.reweight_drop,
+        )
+
+    def go_on(self, cand: Candidate | None, v: Verified) -> VerifyJob:
+        """A verification continued from where ``v`` stopped."""
+        job = self.verify(cand, start_toml=v.model_toml)
+        return dataclasses.replace(job, max_seconds=self.st.continue_seconds, reweight_passes=1)
+
+
+@dataclasses.dataclass
+class _Screened:
+    """The screen and what ran beside it: the recalibrated model, the linear test's fits and
+    the lead's verification, started at once."""
+
+    nonlinear: list[Candidate]
+    screen: Screen
+    baseline: ScreenFit
+    fits: list[ScreenFit]
+    first: list[ScreenFit]
+    second: list[ScreenFit]
+    lead: ScreenFit | None
+    early: list
+    refit: Verified
+    lin_base: LinearFit | None
+    lin_fits: list[LinearFit]
+
+
+@dataclasses.dataclass
+class _Verifying:
+    """The verifications so far: ``done[i]`` verified ``origin[i]``."""
+
+    origin: list
+    done: list[Verified]
+    refit: Verified
+    bar: float  # a candidate no better than the model recalibrated without it stops early
+    st: DiagnosisSettings
+
+    def left(self) -> float:
+        # processor time, so what a diagnosis does does not depend on the machine's load
+        return self.st.time_budget_s - sum(v.cpu_seconds for v in self.done)
+
+    def unexplained(self) -> bool:
+        return _best_rms(self.done) > self.st.explained_rms
 
 
 def diagnose(
@@ -408,193 +525,295 @@ def diagnose(
         timings["total_s"] = time.perf_counter() - t0
         return Diagnosis("adequate", cmp, evidence, timings=timings, settings=st)
     cands = default_candidates(model) if candidates is None else list(candidates)
-    text, source, path = model.to_toml(), str(model.source), str(data.path)
-
-    def verify_job(cand, values=None, known=None, start_toml=None, n_starts=0, seed=0):
-        return VerifyJob(
-            text, source, path, None, cand, dict(values or {}), dict(known or {}),
-            None if linear_run is None else str(linear_run), st.verify_iterations, n_starts,
-            seed, start_toml, st.n_harmonics, st.n_time, st.verify_seconds,
-            reweight_drop=st.reweight_drop,
-        )  # fmt: skip
-
+    jobs = _Jobs(
+        model.to_toml(),
+        str(model.source),
+        str(data.path),
+        None if linear_run is None else str(linear_run),
+        st,
+    )
     with open_executor(st.workers) as ex:
-        t1 = time.perf_counter()
-        nonlinear = [c for c in cands if not (linear_run is not None and c.law.kind in (
-            "mass", "linear_spring", "joint_spring"))]  # fmt: skip
-        # the screen's first pass shared with a worker; the recalibration and the linear
-        # test's candidates on the workers meanwhile
-        mine, theirs = (nonlinear[0::2], nonlinear[1::2]) if ex is not None else (nonlinear, [])
-        share = _Later(ex, screen_pass, ScreenJob(text, source, path, tuple(theirs),
-                                                  st.n_harmonics, st.n_time))  # fmt: skip
-        refit_job = _Later(ex, run_verify, verify_job(None))
-        lin_jobs = []
-        if linear_run is not None:
-            lin = [c for c in cands if c.law.kind in ("mass", "linear_spring", "joint_spring")]
-            lin_jobs = [_Later(ex, run_linear_job, LinearJob(text, source, str(linear_run), c))
-                        for c in [None, *lin]]  # fmt: skip
-        screen = _screen_from(model, data, st, pred)
-        baseline = screen.baseline()
-        fits = screen.first_pass(mine, progress) + (share.result() if theirs else [])
-        fits = screen.refine(fits, st.n_refine, progress)
-        timings["screen_s"] = time.perf_counter() - t1
-        say("screened", {"n": len(fits), "seconds": timings["screen_s"]})
-        refit = refit_job.result()
-        # the screen's best law goes first in any case: its verification starts as soon as a
-        # worker is free, while this process makes the short list (its refinements at
-        # unmeasured DOFs) and the workers finish the linear test
-        lead = _lead(fits)
-        early = []
-        if ex is not None and lead is not None and not _settled(refit, cmp, st):
-            early = [ex.submit(run_verify, dataclasses.replace(
-                verify_job(lead.candidate, lead.values, lead.known),
-                give_up_chi2=refit.chi2_per_dof()))]  # fmt: skip
-        t2 = time.perf_counter()
-        first, second = _shortlist(screen, fits, evidence, st.n_verify, baseline.bic)
-        timings["shortlist_s"] = time.perf_counter() - t2
-        lin_base, lin_fits = None, []
-        if lin_jobs:
-            done = [j.result() for j in lin_jobs]
-            lin_base, lin_fits = done[0], done[1:]
-            for f in lin_fits:
-                f.delta_bic = f.bic - lin_base.bic
-            lin_fits.sort(key=lambda f: f.bic)
-            say("linear screen", {"n": len(lin_fits), "best": lin_fits[0].candidate.label
-                                  if lin_fits else ""})  # fmt: skip
+        sc = _screen_step(model, data, cands, pred, cmp, evidence, jobs, ex, say, progress, timings)
+        refit = sc.refit
         timings["refit_s"] = refit.seconds
         say("recalibrated", {"rms_over_noise": refit.rms_over_noise()})
-        result = Diagnosis("adequate", cmp, evidence, fits, baseline, lin_fits, refit,
-                           timings=timings, settings=st)  # fmt: skip
+        result = Diagnosis(
+            "adequate",
+            cmp,
+            evidence,
+            sc.fits,
+            sc.baseline,
+            sc.lin_fits,
+            refit,
+            timings=timings,
+            settings=st,
+        )
         if refit.rms_over_noise() <= st.adequate_rms:
             timings["total_s"] = time.perf_counter() - t0
             return result
         if _rescreen(refit, cmp, st):
-            # the calibration's values were a poor start (a missing effect can pull the
-            # model's own parameters into a far minimum), and a screen reads the states
-            # through the model's own elements: screen again from the recalibrated model,
-            # which every verification below then starts from (verify_job reads ``text``)
-            t3 = time.perf_counter()
-            say("rescreen", {"rms_over_noise": refit.rms_over_noise()})
-            text = refit.model_toml
-            screen = _screen_from(Model.from_toml_text(text, source), data, st)
-            baseline = screen.baseline()
-            fits = screen.run(nonlinear, st.n_refine, progress, ex)
-            first, second = _shortlist(screen, fits, evidence, st.n_verify, baseline.bic)
-            result.screen, result.baseline, result.rescreened = fits, baseline, True
-            timings["rescreen_s"] = time.perf_counter() - t3
+            _screen_again(sc, result, data, evidence, jobs, ex, say, progress)
         t2 = time.perf_counter()
-        linear_first = _linear_shortlist(lin_base, lin_fits, st)
-        # the best law at its two best locations, the linear test's candidates and the next
-        # pick (at an unmeasured location, else the next law) first; the other picks are
-        # dropped once a verified candidate is at the noise or the stage's processor time is
-        # spent
-        n_lead = min(2, len(first))
-        origin: list = [*first[:n_lead], *linear_first, *first[n_lead:]]
-        essential = len(origin) - len(first) + min(3, len(first))
-        # a candidate no better than the model recalibrated without it stops early
-        bar = refit.chi2_per_dof()
-        jobs = [dataclasses.replace(
-            verify_job(o.candidate, start_toml=o.model_toml) if isinstance(o, LinearFit)
-            else verify_job(o.candidate, o.values, o.known), give_up_chi2=bar)
-            for o in origin]  # fmt: skip
-
-        def enough(vs: list[Verified]) -> bool:
-            # one at the noise, or the processor time of the stage spent
-            spent = sum(v.cpu_seconds for v in vs)
-            return any(v.rms_over_noise() <= st.adequate_rms for v in vs) or (
-                spent >= st.time_budget_s
-            )
-
-        def go_on(cand: Candidate | None, v: Verified) -> VerifyJob:
-            job = verify_job(cand, start_toml=v.model_toml)
-            return dataclasses.replace(job, max_seconds=st.continue_seconds, reweight_passes=1)
-
-        gone_on: list[int] = []
-
-        def follow(i: int, v: Verified) -> VerifyJob | None:
-            if len(gone_on) >= 2 or not _goes_on_at_once(v, refit, st):
-                return None
-            gone_on.append(i)
-            say("continue", {"n": 1, "rms_over_noise": v.rms_over_noise()})
-            return go_on(jobs[i].candidate, v)
-
-        # the jobs run are the first len(ran), in order: their indices are their positions
-        assert not early or origin[0] is lead
-        ran, further = _run_verifications(ex, jobs, essential, enough, st.workers, follow, early)
-        origin = origin[: len(ran)]
-        done = list(ran.values())
-        for i, v in further.items():
-            _merge(done, i, v)
-        say("verified", {"n": len(done), "best_rms": _best_rms(done)})
-
-        def left() -> float:
-            # processor time, so what a diagnosis does does not depend on the machine's load
-            return st.time_budget_s - sum(v.cpu_seconds for v in done)
-
-        def unexplained() -> bool:
-            return _best_rms(done) > st.explained_rms
-
-        # the fits still falling fast go on (:func:`_to_continue`; those that went most of the
-        # way went on as soon as they finished); then the best: at a measured point, if it
-        # explains the misfit or went most of the way, its law at the next points by the
-        # screen, from the best's fit (the screen can rank a strong effect's true point third
-        # or fourth, and a neighbour can explain it nearly to the noise: the contact at the
-        # point next to the second stop reached 1.27 x noise in one run, 1.66 in another, the
-        # stop's own point 1.01); at an unmeasured location, if the best is not at the noise,
-        # the next laws there
-        going = _to_continue(done, refit, st, left() > 0, list(further)) if unexplained() else []
-        if going:
-            say("continue", {"n": len(going)})
-        cont = [_Later(ex, run_verify, go_on(origin[i].candidate, done[i])) for i in going]
-        for i, p in zip(going, cont, strict=True):
-            _merge(done, i, p.result())
-        ranked = [i for i in np.argsort([v.chi2_per_dof() for v in done]) if not done[i].failed]
-        lead = origin[ranked[0]] if ranked else None
-        walk_to = _walk_to(lead, done[ranked[0]] if ranked else None, refit, st)
-        if walk_to:
-            tried = [o.candidate for o in origin]
-            if walk_to == "points":
-                walk = _walk_jobs(done[ranked[0]], fits, tried, st.n_walk)
-                say("neighbours", {"n": len(walk)})
-            else:
-                laws = _other_laws(screen, fits, lead.candidate, tried, st.n_walk)
-                walk = [(f, f.values, f.known) for f in laws]
-                say("other laws", {"n": len(walk)})
-            more = [_Later(ex, run_verify, dataclasses.replace(
-                verify_job(f.candidate, values, known), give_up_chi2=bar))
-                for f, values, known in walk]  # fmt: skip
-            done += [p.result() for p in more]
-            origin += [f for f, _, _ in walk]
-
-        if unexplained() and second and left() > 0:
-            more = [_Later(ex, run_verify, verify_job(f.candidate, f.values, f.known))
-                    for f in second]  # fmt: skip
-            done += [p.result() for p in more]
-            origin += second
-            say("verified", {"n": len(done), "best_rms": _best_rms(done)})
-        order = np.argsort([v.chi2_per_dof() for v in done])
-        best_rms = done[order[0]].rms_over_noise() if done else math.inf
-        # further starts only for a candidate that went most of the way (a local minimum of
-        # a strong effect), not for one that explains little
-        if (st.n_starts > 0 and best_rms > st.explained_rms and done
-                and _promising(done[order[0]], refit, st) and left() > 0):  # fmt: skip
-            again = [int(i) for i in order[:2] if not done[i].failed]
-            say("restart", {"n": len(again)})
-            retry = []
-            for i in again:
-                o = origin[i]
-                if isinstance(o, LinearFit):
-                    job = verify_job(o.candidate, start_toml=o.model_toml, n_starts=st.n_starts)
-                else:
-                    job = verify_job(o.candidate, o.values, o.known, n_starts=st.n_starts)
-                retry.append(_Later(ex, run_verify, job))
-            for i, p in zip(again, retry, strict=True):
-                v = p.result()
-                if v.chi2_per_dof() < done[i].chi2_per_dof():
-                    v.seconds += done[i].seconds
-                    done[i] = v
+        run, further = _first_verifications(sc, jobs, ex, say)
+        _continue_falling(run, further, jobs, ex, say)
+        _walk_from_best(run, sc, jobs, ex, say)
+        _second_picks(run, sc, jobs, ex, say)
+        _restart_best(run, jobs, ex, say)
     timings["verify_s"] = time.perf_counter() - t2
-    ranking, model_bic = _rank(model, refit, origin, done, st)
+    _conclude(result, model, data, run)
+    timings["total_s"] = time.perf_counter() - t0
+    return result
+
+
+def _screen_step(
+    model: Model,
+    data,
+    cands,
+    pred,
+    cmp,
+    evidence: Evidence,
+    jobs: _Jobs,
+    ex,
+    say,
+    progress,
+    timings,
+) -> _Screened:
+    """The screen, with the recalibration and the linear test's candidates on the workers
+    meanwhile; the lead's verification started as soon as the screen has it."""
+    st = jobs.st
+    t1 = time.perf_counter()
+    nonlinear = [
+        c
+        for c in cands
+        if not (
+            jobs.linear_run is not None and c.law.kind in ("mass", "linear_spring", "joint_spring")
+        )
+    ]
+    # the screen's first pass shared with a worker; the recalibration and the linear
+    # test's candidates on the workers meanwhile
+    mine, theirs = (nonlinear[0::2], nonlinear[1::2]) if ex is not None else (nonlinear, [])
+    share = _Later(
+        ex,
+        screen_pass,
+        ScreenJob(jobs.text, jobs.source, jobs.path, tuple(theirs), st.n_harmonics, st.n_time),
+    )
+    refit_job = _Later(ex, run_verify, jobs.verify(None))
+    lin_jobs = []
+    if jobs.linear_run is not None:
+        lin = [c for c in cands if c.law.kind in ("mass", "linear_spring", "joint_spring")]
+        lin_jobs = [
+            _Later(ex, run_linear_job, LinearJob(jobs.text, jobs.source, jobs.linear_run, c))
+            for c in [None, *lin]
+        ]
+    screen = _screen_from(model, data, st, pred)
+    baseline = screen.baseline()
+    fits = screen.first_pass(mine, progress) + (share.result() if theirs else [])
+    fits = screen.refine(fits, st.n_refine, progress)
+    timings["screen_s"] = time.perf_counter() - t1
+    say("screened", {"n": len(fits), "seconds": timings["screen_s"]})
+    refit = refit_job.result()
+    # the screen's best law goes first in any case: its verification starts as soon as a
+    # worker is free, while this process makes the short list (its refinements at
+    # unmeasured DOFs) and the workers finish the linear test
+    lead = _lead(fits)
+    early = []
+    if ex is not None and lead is not None and not _settled(refit, cmp, st):
+        early = [
+            ex.submit(
+                run_verify,
+                dataclasses.replace(
+                    jobs.verify(lead.candidate, lead.values, lead.known),
+                    give_up_chi2=refit.chi2_per_dof(),
+                ),
+            )
+        ]
+    t2 = time.perf_counter()
+    first, second = _shortlist(screen, fits, evidence, st.n_verify, baseline.bic)
+    timings["shortlist_s"] = time.perf_counter() - t2
+    lin_base, lin_fits = _linear_results(lin_jobs, say)
+    return _Screened(
+        nonlinear, screen, baseline, fits, first, second, lead, early, refit, lin_base, lin_fits
+    )
+
+
+def _linear_results(lin_jobs: list[_Later], say) -> tuple[LinearFit | None, list[LinearFit]]:
+    """The linear test's recalibrated model and its candidates, best first."""
+    if not lin_jobs:
+        return None, []
+    done = [j.result() for j in lin_jobs]
+    lin_base, lin_fits = done[0], done[1:]
+    for f in lin_fits:
+        f.delta_bic = f.bic - lin_base.bic
+    lin_fits.sort(key=lambda f: f.bic)
+    say(
+        "linear screen",
+        {"n": len(lin_fits), "best": lin_fits[0].candidate.label if lin_fits else ""},
+    )
+    return lin_base, lin_fits
+
+
+def _screen_again(
+    sc: _Screened, result: Diagnosis, data, evidence: Evidence, jobs: _Jobs, ex, say, progress
+) -> None:
+    """The calibration's values were a poor start (a missing effect can pull the model's own
+    parameters into a far minimum), and a screen reads the states through the model's own
+    elements: screen again from the recalibrated model, which every verification then starts
+    from (``jobs.text``)."""
+    st = jobs.st
+    t3 = time.perf_counter()
+    say("rescreen", {"rms_over_noise": sc.refit.rms_over_noise()})
+    jobs.text = sc.refit.model_toml
+    sc.screen = _screen_from(Model.from_toml_text(jobs.text, jobs.source), data, st)
+    sc.baseline = sc.screen.baseline()
+    sc.fits = sc.screen.run(sc.nonlinear, st.n_refine, progress, ex)
+    sc.first, sc.second = _shortlist(sc.screen, sc.fits, evidence, st.n_verify, sc.baseline.bic)
+    result.screen, result.baseline, result.rescreened = sc.fits, sc.baseline, True
+    result.timings["rescreen_s"] = time.perf_counter() - t3
+
+
+def _first_verifications(sc: _Screened, jobs: _Jobs, ex, say) -> tuple[_Verifying, list[int]]:
+    """The short list's first stage verified; returns the verifications and the indices of
+    those that went on at once."""
+    st, refit = jobs.st, sc.refit
+    first = sc.first
+    linear_first = _linear_shortlist(sc.lin_base, sc.lin_fits, st)
+    # the best law at its two best locations, the linear test's candidates and the next
+    # pick (at an unmeasured location, else the next law) first; the other picks are
+    # dropped once a verified candidate is at the noise or the stage's processor time is
+    # spent
+    n_lead = min(2, len(first))
+    origin: list = [*first[:n_lead], *linear_first, *first[n_lead:]]
+    essential = len(origin) - len(first) + min(3, len(first))
+    # a candidate no better than the model recalibrated without it stops early
+    bar = refit.chi2_per_dof()
+    vjobs = [
+        dataclasses.replace(
+            jobs.verify(o.candidate, start_toml=o.model_toml)
+            if isinstance(o, LinearFit)
+            else jobs.verify(o.candidate, o.values, o.known),
+            give_up_chi2=bar,
+        )
+        for o in origin
+    ]
+
+    def enough(vs: list[Verified]) -> bool:
+        # one at the noise, or the processor time of the stage spent
+        spent = sum(v.cpu_seconds for v in vs)
+        return any(v.rms_over_noise() <= st.adequate_rms for v in vs) or (spent >= st.time_budget_s)
+
+    gone_on: list[int] = []
+
+    def follow(i: int, v: Verified) -> VerifyJob | None:
+        if len(gone_on) >= 2 or not _goes_on_at_once(v, refit, st):
+            return None
+        gone_on.append(i)
+        say("continue", {"n": 1, "rms_over_noise": v.rms_over_noise()})
+        return jobs.go_on(vjobs[i].candidate, v)
+
+    # the jobs run are the first len(ran), in order: their indices are their positions
+    assert not sc.early or origin[0] is sc.lead
+    ran, further = _run_verifications(ex, vjobs, essential, enough, st.workers, follow, sc.early)
+    done = list(ran.values())
+    for i, v in further.items():
+        _merge(done, i, v)
+    say("verified", {"n": len(done), "best_rms": _best_rms(done)})
+    return _Verifying(origin[: len(ran)], done, refit, bar, st), list(further)
+
+
+def _continue_falling(run: _Verifying, further: list[int], jobs: _Jobs, ex, say) -> None:
+    """The fits still falling fast go on (:func:`_to_continue`; those that went most of the
+    way went on as soon as they finished)."""
+    going = (
+        _to_continue(run.done, run.refit, run.st, run.left() > 0, further)
+        if run.unexplained()
+        else []
+    )
+    if going:
+        say("continue", {"n": len(going)})
+    cont = [_Later(ex, run_verify, jobs.go_on(run.origin[i].candidate, run.done[i])) for i in going]
+    for i, p in zip(going, cont, strict=True):
+        _merge(run.done, i, p.result())
+
+
+def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say) -> None:
+    """From the best: at a measured point, if it explains the misfit or went most of the way,
+    its law at the next points by the screen, from the best's fit (the screen can rank a
+    strong effect's true point third or fourth, and a neighbour can explain it nearly to the
+    noise: the contact at the point next to the second stop reached 1.27 x noise in one run,
+    1.66 in another, the stop's own point 1.01); at an unmeasured location, if the best is not
+    at the noise, the next laws there."""
+    done, origin = run.done, run.origin
+    ranked = [i for i in np.argsort([v.chi2_per_dof() for v in done]) if not done[i].failed]
+    lead = origin[ranked[0]] if ranked else None
+    walk_to = _walk_to(lead, done[ranked[0]] if ranked else None, run.refit, run.st)
+    if not walk_to:
+        return
+    tried = [o.candidate for o in origin]
+    if walk_to == "points":
+        walk = _walk_jobs(done[ranked[0]], sc.fits, tried, run.st.n_walk)
+        say("neighbours", {"n": len(walk)})
+    else:
+        laws = _other_laws(sc.screen, sc.fits, lead.candidate, tried, run.st.n_walk)
+        walk = [(f, f.values, f.known) for f in laws]
+        say("other laws", {"n": len(walk)})
+    more = [
+        _Later(
+            ex,
+            run_verify,
+            dataclasses.replace(jobs.verify(f.candidate, values, known), give_up_chi2=run.bar),
+        )
+        for f, values, known in walk
+    ]
+    run.done += [p.result() for p in more]
+    run.origin += [f for f, _, _ in walk]
+
+
+def _second_picks(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say) -> None:
+    """If none explains it, while time is left, the short list's second stage."""
+    if not (run.unexplained() and sc.second and run.left() > 0):
+        return
+    more = [_Later(ex, run_verify, jobs.verify(f.candidate, f.values, f.known)) for f in sc.second]
+    run.done += [p.result() for p in more]
+    run.origin += sc.second
+    say("verified", {"n": len(run.done), "best_rms": _best_rms(run.done)})
+
+
+def _restart_best(run: _Verifying, jobs: _Jobs, ex, say) -> None:
+    """Further starts for the best two, only if the best went most of the way (a local
+    minimum of a strong effect), not for one that explains little; a restart is kept where it
+    fits better."""
+    st, done = run.st, run.done
+    order = np.argsort([v.chi2_per_dof() for v in done])
+    best_rms = done[order[0]].rms_over_noise() if done else math.inf
+    if not (
+        st.n_starts > 0
+        and best_rms > st.explained_rms
+        and done
+        and _promising(done[order[0]], run.refit, st)
+        and run.left() > 0
+    ):
+        return
+    again = [int(i) for i in order[:2] if not done[i].failed]
+    say("restart", {"n": len(again)})
+    retry = []
+    for i in again:
+        o = run.origin[i]
+        if isinstance(o, LinearFit):
+            job = jobs.verify(o.candidate, start_toml=o.model_toml, n_starts=st.n_starts)
+        else:
+            job = jobs.verify(o.candidate, o.values, o.known, n_starts=st.n_starts)
+        retry.append(_Later(ex, run_verify, job))
+    for i, p in zip(again, retry, strict=True):
+        v = p.result()
+        if v.chi2_per_dof() < done[i].chi2_per_dof():
+            v.seconds += done[i].seconds
+            done[i] = v
+
+
+def _conclude(result: Diagnosis, model: Model, data, run: _Verifying) -> None:
+    """The ranking, the verdict and, for a group, the measurement that would separate it."""
+    st = run.st
+    ranking, model_bic = _rank(model, run.refit, run.origin, run.done, st)
     verdict = "unexplained"
     if ranking and ranking[0].rms_over_noise <= st.explained_rms and ranking[0].delta_bic < 0:
         verdict = "explained"
@@ -607,9 +826,7 @@ def diagnose(
             result.recommendation = discriminate(result.group, data)
         except (ValueError, RuntimeError) as exc:
             log.warning("no discriminating measurement: %s", exc)
-        timings["discriminate_s"] = time.perf_counter() - t3
-    timings["total_s"] = time.perf_counter() - t0
-    return result
+        result.timings["discriminate_s"] = time.perf_counter() - t3
 
 
 def _rank(model: Model, refit: Verified, origin: list, done: list[Verified], st):
@@ -618,8 +835,11 @@ def _rank(model: Model, refit: Verified, origin: list, done: list[Verified], st)
     base_step = refit.step_chi2
     n_base = int(np.isfinite(base_step).sum())
     # a recalibrated model that fails on many steps the model solves is not comparable
-    keep = [(o, v) for o, v in zip(origin, done, strict=True) if not v.failed
-            and np.isfinite(v.step_chi2[np.isfinite(base_step)]).sum() >= 0.9 * n_base]  # fmt: skip
+    keep = [
+        (o, v)
+        for o, v in zip(origin, done, strict=True)
+        if not v.failed and np.isfinite(v.step_chi2[np.isfinite(base_step)]).sum() >= 0.9 * n_base
+    ]
     common = np.isfinite(base_step)
     for _, v in keep:
         common &= np.isfinite(v.step_chi2)
@@ -637,18 +857,24 @@ def _rank(model: Model, refit: Verified, origin: list, done: list[Verified], st)
         return [], model_bic
     scored.sort(key=lambda t: t[0])
     best = scored[0][0]
-    tied = sorted([t for t in scored if t[0] - best <= st.tie_bic],
-                  key=lambda t: (t[1].candidate.n_params, t[0]))  # fmt: skip
+    tied = sorted(
+        [t for t in scored if t[0] - best <= st.tie_bic],
+        key=lambda t: (t[1].candidate.n_params, t[0]),
+    )
     rest = [t for t in scored if t[0] - best > st.tie_bic]
     ranked = []
     for i, (bic, o, v) in enumerate(tied + rest):
         ranked.append(
             RankedCandidate(
-                rank=i + 1, group=1 if i < len(tied) else i - len(tied) + 2,
-                candidate=o.candidate, bic=bic, delta_bic=bic - model_bic,
-                rms_over_noise=v.rms_over_noise(common), verified=v,
+                rank=i + 1,
+                group=1 if i < len(tied) else i - len(tied) + 2,
+                candidate=o.candidate,
+                bic=bic,
+                delta_bic=bic - model_bic,
+                rms_over_noise=v.rms_over_noise(common),
+                verified=v,
                 screen=o if isinstance(o, ScreenFit) else None,
                 linear=o if isinstance(o, LinearFit) else None,
             )
-        )  # fmt: skip
+        )
     return ranked, model_bic

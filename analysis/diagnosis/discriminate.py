@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -69,11 +70,17 @@ def discriminate(
         any_param = (model.parameter_names(group="nonlinear") or model.parameter_names())[:1]
         for li, lv in enumerate(levels):
             for ri, rg in enumerate(ranges):
-                job = SweepJob(text, act, tuple(complex(lv * r) for r in ratio),
-                               tuple(rg.frequencies_hz().tolist()), sensors, tuple(any_param),
-                               orders=tuple(data.orders))  # fmt: skip
+                job = SweepJob(
+                    text,
+                    act,
+                    tuple(complex(lv * r) for r in ratio),
+                    tuple(rg.frequencies_hz().tolist()),
+                    sensors,
+                    tuple(any_param),
+                    orders=tuple(data.orders),
+                )
                 outputs[m_i, li, ri] = run_sweep(job)
-    rows = []
+    rows: list[dict[str, Any]] = []
     for li, lv in enumerate(levels):
         for ri, rg in enumerate(ranges):
             worst = None
@@ -93,19 +100,30 @@ def discriminate(
             if worst is None:
                 continue
             for si, s in enumerate(sensors):
-                rows.append({"sensor": int(s), "level_n": float(lv), "range": rg.label,
-                             "power": float(worst[si])})  # fmt: skip
+                rows.append(
+                    {
+                        "sensor": int(s),
+                        "level_n": float(lv),
+                        "range": rg.label,
+                        "power": float(worst[si]),
+                    }
+                )
     rows.sort(key=lambda r: -r["power"] if np.isfinite(r["power"]) else np.inf)
     if not rows:
         raise RuntimeError("no configuration converged for every tied candidate")
     best = rows[0]
     measured = {ch.point for ch in data.channels}
     text = (
-        f"add a sensor at point {best['sensor']}" if best["sensor"] not in measured
+        f"add a sensor at point {best['sensor']}"
+        if best["sensor"] not in measured
         else f"use point {best['sensor']}"
     ) + (
         f" at {best['level_n']:g} N in {best['range']} Hz: the tied candidates' predictions "
         f"differ there by {best['power']:.3g} standard errors (RMS, worst pair)"
-    )  # fmt: skip
-    return {"best": best, "table": rows[:n_best], "text": text, "candidates":
-            [g.candidate.label for g in group]}  # fmt: skip
+    )
+    return {
+        "best": best,
+        "table": rows[:n_best],
+        "text": text,
+        "candidates": [g.candidate.label for g in group],
+    }

@@ -112,20 +112,32 @@ def run_linear_job(job: LinearJob) -> LinearFit:
         names = tuple(model.parameter_names(group="linear", calibrate=True))
         run = read_measurement(job.run_path)
         # every candidate fits the same parameters, or their costs do not compare
-        res = calibrate_linear(model, run, parameters=names, min_modes=min(4, len(names)),
-                               zeta0_schedule=(), weak_parameters="fit")  # fmt: skip
+        res = calibrate_linear(
+            model,
+            run,
+            parameters=names,
+            min_modes=min(4, len(names)),
+            zeta0_schedule=(),
+            weak_parameters="fit",
+        )
         n, k = int(res.jac.shape[0]), len(names)
         return LinearFit(
-            cand, float(res.cost), n, k, _bic(float(res.cost), n, k),
+            cand,
+            float(res.cost),
+            n,
+            k,
+            _bic(float(res.cost), n, k),
             values={p: float(res.parameters[p]) for p in new if p in res.parameters},
-            parameters=dict(res.parameters), model_toml=res.model.to_toml(),
+            parameters=dict(res.parameters),
+            model_toml=res.model.to_toml(),
             seconds=time.perf_counter() - t0,
-        )  # fmt: skip
+        )
     except Exception as exc:  # a worker must return, whatever the candidate does
         label = "the model" if cand is None else cand.label
         log.warning("linear recalibration of %s failed: %s", label, exc)
-        return LinearFit(cand, math.inf, 0, 0, math.inf, message=str(exc),
-                         seconds=time.perf_counter() - t0)  # fmt: skip
+        return LinearFit(
+            cand, math.inf, 0, 0, math.inf, message=str(exc), seconds=time.perf_counter() - t0
+        )
 
 
 def linear_screen(

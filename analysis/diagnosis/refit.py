@@ -109,8 +109,12 @@ def _watch(seen: list, progress, deadline: float | None, give_up, drop, h: dict)
         progress("lm", h)
     if deadline is not None and time.process_time() > deadline and h["iteration"] > 0:
         raise _OutOfTime
-    if (drop is not None and h["iteration"] >= 1 and h["cost"] * drop < seen[0]["cost"]
-            and h["cost"] > (1 - STALL) * seen[-2]["cost"]):  # fmt: skip
+    if (
+        drop is not None
+        and h["iteration"] >= 1
+        and h["cost"] * drop < seen[0]["cost"]
+        and h["cost"] > (1 - STALL) * seen[-2]["cost"]
+    ):
         raise _Reweigh
     if give_up is not None and h["iteration"] >= 1 and len(seen) >= 2:
         # still above the bar and no longer falling fast: hopeless two iterations in, or one
@@ -148,8 +152,9 @@ def _stopped(
     x = np.array(seen[-1]["x"])
     r = fun.r if fun.x is not None and np.array_equal(fun.x, x) else fun.obj(x, False)[0]
     cov = np.full((x.size, x.size), np.nan)
-    return LeastSquaresResult(x, 0.5 * float(r @ r), r, None, cov, 0, 0, seen[-1]["iteration"],
-                              False, message, list(seen))  # fmt: skip
+    return LeastSquaresResult(
+        x, 0.5 * float(r @ r), r, None, cov, 0, 0, seen[-1]["iteration"], False, message, list(seen)
+    )
 
 
 def _current(model: Model, name: str) -> float:
@@ -244,16 +249,78 @@ def refit(
     Refit
     """
     if reweight_passes:
-        again = functools.partial(refit, data=data, parameters=parameters, rows=rows, ftol=ftol,
-                                  n_harmonics=n_harmonics, n_time=n_time, progress=progress,
-                                  max_seconds=max_seconds, reweight_drop=reweight_drop)  # fmt: skip
-        first = again(model, starts=starts, distributions=distributions,
-                      n_random_starts=n_random_starts, n_lm_starts=n_lm_starts, seed=seed,
-                      max_iterations=max_iterations, give_up_chi2=give_up_chi2)  # fmt: skip
+        again = functools.partial(
+            refit,
+            data=data,
+            parameters=parameters,
+            rows=rows,
+            ftol=ftol,
+            n_harmonics=n_harmonics,
+            n_time=n_time,
+            progress=progress,
+            max_seconds=max_seconds,
+            reweight_drop=reweight_drop,
+        )
+        first = again(
+            model,
+            starts=starts,
+            distributions=distributions,
+            n_random_starts=n_random_starts,
+            n_lm_starts=n_lm_starts,
+            seed=seed,
+            max_iterations=max_iterations,
+            give_up_chi2=give_up_chi2,
+        )
         return _reweighted(first, again, reweight_passes, max_iterations)
     t0 = time.perf_counter()
     names = tuple(parameters)
     rows = np.arange(data.n_steps) if rows is None else np.asarray(rows)
+    obj, base, good = _converged_objective(model, data, names, rows, n_harmonics, n_time)
+    space = obj.space
+    p0 = np.array([_current(model, n) for n in names])
+    thetas = _start_thetas(space, names, p0, starts, distributions, n_random_starts, seed)
+    whole = good.size == rows.size
+    costs = _start_costs(obj, thetas, p0, base if whole else None, progress)
+    deadline = None if max_seconds is None else time.process_time() + max_seconds
+    best, reweigh = _lm_from_starts(
+        obj,
+        thetas,
+        costs,
+        n_lm_starts,
+        _LMLimits(max_iterations, ftol, deadline, give_up_chi2),
+        reweight_drop if n_lm_starts == 1 else None,
+        progress,
+    )
+    if len(thetas) == 1 and best is not None and best.history:
+        costs = np.array([best.history[0]["cost"]])
+    out = _as_refit(model, names, space, best, costs, t0)
+    left = None if deadline is None else deadline - time.process_time()
+    if not reweigh or best.nit >= max_iterations or (left is not None and left <= 0):
+        return out
+    try:
+        nxt = refit(
+            out.model,
+            data,
+            parameters,
+            rows=rows,
+            ftol=ftol,
+            n_harmonics=n_harmonics,
+            n_time=n_time,
+            progress=progress,
+            max_seconds=left,
+            give_up_chi2=give_up_chi2,
+            max_iterations=max_iterations - best.nit,
+            reweight_drop=reweight_drop,
+        )
+    except (RuntimeError, ValueError) as exc:  # the fitted model fails on a fitted step
+        log.info("no fit with the weights recomputed: %s", exc)
+        return out
+    return _joined(out, nxt, best.nit, t0)
+
+
+def _converged_objective(model: Model, data, names, rows, n_harmonics: int, n_time: int):
+    """The weighted objective on the fitted steps where the start model converges, the start
+    model's prediction and those steps."""
     obj = _objective(model, data, names, rows, n_harmonics, n_time)
     base, sigma = obj.predictor.predict_with_sigma(rows=rows)
     good = rows[base.converged[rows]]
@@ -265,8 +332,12 @@ def refit(
         )
         obj = _objective(model, data, names, good, n_harmonics, n_time)
     _reweight(obj, sigma)
-    space = obj.space
-    p0 = np.array([_current(model, n) for n in names])
+    return obj, base, good
+
+
+def _start_thetas(space, names, p0, starts, distributions, n_random_starts: int, seed: int):
+    """The starts in the fit's scaled coordinates, within its bounds: the model's values, the
+    given starts, then the Latin hypercube's."""
     candidates = [p0]
     for s in starts:
         candidates.append(np.array([float(s.get(n, v)) for n, v in zip(names, p0, strict=True)]))
@@ -274,7 +345,13 @@ def refit(
         dists = dict(distributions or {})
         candidates += list(latin_hypercube(dists, n_random_starts, seed, names))
     lo, hi = space.theta_bounds()
-    thetas = np.clip(np.array([space.to_theta(c) for c in candidates]), lo, hi)
+    return np.clip(np.array([space.to_theta(c) for c in candidates]), lo, hi)
+
+
+def _start_costs(obj: FRFObjective, thetas, p0, base, progress) -> np.ndarray:
+    """The metric at each start; ``base`` is the start model's prediction when it holds on
+    every fitted step (the first start's metric without a solve)."""
+    space = obj.space
     costs = []
     if len(thetas) == 1:
         costs = [np.nan]  # one start: its metric is Levenberg-Marquardt's first evaluation
@@ -282,7 +359,7 @@ def refit(
         for i, th in enumerate(thetas):
             if (
                 i == 0
-                and good.size == rows.size
+                and base is not None
                 and np.allclose(space.to_physical(th), p0, rtol=1e-12, atol=0)
             ):
                 costs.append(obj.cost_of(base))  # the start model itself, predicted above
@@ -290,26 +367,49 @@ def refit(
                 costs.append(obj.cost(th))
             if progress:
                 progress("start", {"index": i, "n": len(thetas), "cost": costs[-1]})
-    costs = np.array(costs)
-    if len(thetas) > 1 and not np.isfinite(costs).any():
+    out = np.array(costs)
+    if len(thetas) > 1 and not np.isfinite(out).any():
         raise RuntimeError("no start gives a converged model response on the fitted steps")
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class _LMLimits:
+    """When Levenberg-Marquardt stops: iterations, relative fall, the processor-time
+    deadline and the chi-square per degree of freedom it must get below (see :func:`refit`)."""
+
+    max_iterations: int
+    ftol: float
+    deadline: float | None
+    give_up_chi2: float | None
+
+
+def _lm_from_starts(
+    obj: FRFObjective, thetas, costs, n_lm_starts: int, lim: _LMLimits, drop, progress
+) -> tuple[LeastSquaresResult | None, bool]:
+    """Levenberg-Marquardt from the ``n_lm_starts`` best starts; the best fit, and whether it
+    stopped for its weights to be recomputed."""
+    space = obj.space
+    lo, hi = space.theta_bounds()
     best: LeastSquaresResult | None = None
-    deadline = None if max_seconds is None else time.process_time() + max_seconds
-    drop = reweight_drop if n_lm_starts == 1 else None
     reweigh = False
     for k in np.argsort(costs)[:n_lm_starts]:
         if len(thetas) > 1 and not np.isfinite(costs[k]):
             continue
         seen: list[dict] = []
-        fun = _Remember(obj, deadline)
+        fun = _Remember(obj, lim.deadline)
         bar = None
-        if give_up_chi2 is not None:
-            bar = (give_up_chi2, lambda fun=fun: max(fun.r.size - space.size, 1))
+        if lim.give_up_chi2 is not None:
+            bar = (lim.give_up_chi2, lambda fun=fun: max(fun.r.size - space.size, 1))
         try:
             res = least_squares_lm(
-                fun, thetas[k], bounds=(lo, hi), max_iterations=max_iterations, ftol=ftol,
-                callback=functools.partial(_watch, seen, progress, deadline, bar, drop),
-            )  # fmt: skip
+                fun,
+                thetas[k],
+                bounds=(lo, hi),
+                max_iterations=lim.max_iterations,
+                ftol=lim.ftol,
+                callback=functools.partial(_watch, seen, progress, lim.deadline, bar, drop),
+            )
         except _Reweigh:
             res, reweigh = _stopped(fun, seen, "reweighted"), True
         except _GiveUp:
@@ -318,8 +418,11 @@ def refit(
             res = _stopped(fun, seen)
         if best is None or res.cost < best.cost:
             best = res
-    if len(thetas) == 1 and best is not None and best.history:
-        costs = np.array([best.history[0]["cost"]])
+    return best, reweigh
+
+
+def _as_refit(model: Model, names, space, best: LeastSquaresResult, costs, t0: float) -> Refit:
+    """The fitted model, its standard errors and its history from the best fit."""
     m, n = best.fun.size, space.size
     dof = max(m - n, 1)
     values = space.as_dict(space.to_physical(best.x))
@@ -334,7 +437,7 @@ def refit(
         }
         for h in best.history
     ]
-    out = Refit(
+    return Refit(
         model=fitted,
         parameters=values,
         std=dict(zip(names, std.tolist(), strict=True)),
@@ -345,23 +448,21 @@ def refit(
         lm=best,
         seconds=time.perf_counter() - t0,
     )
-    left = None if deadline is None else deadline - time.process_time()
-    if not reweigh or best.nit >= max_iterations or (left is not None and left <= 0):
-        return out
-    try:
-        nxt = refit(fitted, data, parameters, rows=rows, ftol=ftol, n_harmonics=n_harmonics,
-                    n_time=n_time, progress=progress, max_seconds=left,
-                    give_up_chi2=give_up_chi2, max_iterations=max_iterations - best.nit,
-                    reweight_drop=reweight_drop)  # fmt: skip
-    except (RuntimeError, ValueError) as exc:  # the fitted model fails on a fitted step
-        log.info("no fit with the weights recomputed: %s", exc)
-        return out
+
+
+def _joined(out: Refit, nxt: Refit, nit: int, t0: float) -> Refit:
+    """The fit continued with its weights recomputed (``nxt``) after ``out``'s ``nit``
+    iterations, with the history of both."""
     # "pass" numbers the fits with their own weights
-    later = [{**h, "iteration": h["iteration"] + best.nit, "pass": h.get("pass", 0) + 1}
-             for h in nxt.history]  # fmt: skip
-    return dataclasses.replace(nxt, history=[{**h, "pass": 0} for h in history] + later,
-                               start_costs=out.start_costs,
-                               seconds=time.perf_counter() - t0)  # fmt: skip
+    later = [
+        {**h, "iteration": h["iteration"] + nit, "pass": h.get("pass", 0) + 1} for h in nxt.history
+    ]
+    return dataclasses.replace(
+        nxt,
+        history=[{**h, "pass": 0} for h in out.history] + later,
+        start_costs=out.start_costs,
+        seconds=time.perf_counter() - t0,
+    )
 
 
 def _reweighted(fit: Refit, again: Callable[..., Refit], passes: int, max_iterations: int) -> Refit:
@@ -388,5 +489,6 @@ def _reweighted(fit: Refit, again: Callable[..., Refit], passes: int, max_iterat
         history += [{**h, "iteration": h["iteration"] + offset, "pass": k} for h in f.history]
         offset = history[-1]["iteration"]
     log.info("reweighted fits: own chi2/dof %s, kept pass %d", own, kept)
-    return dataclasses.replace(fits[kept], history=history, start_costs=fit.start_costs,
-                               seconds=time.perf_counter() - t0)  # fmt: skip
+    return dataclasses.replace(
+        fits[kept], history=history, start_costs=fit.start_costs, seconds=time.perf_counter() - t0
+    )

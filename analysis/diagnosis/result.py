@@ -244,10 +244,13 @@ class Diagnosis:
         lines = [
             f"model against the file: residual {cmp.rms_over_noise:.3g} x noise "
             f"(chi2/dof {cmp.chi2_per_dof:.3g})"
-            + (f"; {cmp.left_out.size} step(s) not converged under force control left out"
-               if cmp.left_out.size else ""),
+            + (
+                f"; {cmp.left_out.size} step(s) not converged under force control left out"
+                if cmp.left_out.size
+                else ""
+            ),
             self.evidence.summary(),
-        ]  # fmt: skip
+        ]
         if self.refit is not None:
             lines.append(
                 f"the model's own parameters recalibrated: residual {self.refit_rms:.3g} x noise"
@@ -261,16 +264,19 @@ class Diagnosis:
             )
             return "\n".join(lines)
         if self.linear:
-            lines.append("linear test, each linear candidate with the linear parameters "
-                         "recalibrated (delta BIC against the model):")  # fmt: skip
+            lines.append(
+                "linear test, each linear candidate with the linear parameters "
+                "recalibrated (delta BIC against the model):"
+            )
             for f in self.linear[:4]:
                 lines.append(
                     f"  {f.delta_bic:10.1f}  {f.candidate.label}  "
                     + ", ".join(f"{k} {v:.4g}" for k, v in f.values.items())
                 )
         if self.baseline is not None and self.screen:
-            against = ("the model with its own parameters recalibrated" if self.rescreened
-                       else "the model")  # fmt: skip
+            against = (
+                "the model with its own parameters recalibrated" if self.rescreened else "the model"
+            )
             lines.append(f"screen ({len(self.screen)} candidates; delta BIC against {against}):")
             for f in self.screen[:n]:
                 lines.append(
@@ -299,9 +305,12 @@ class Diagnosis:
             best = self.ranking[0] if self.ranking else None
             lines.append(
                 "verdict: nothing in the element library explains the misfit"
-                + (f"; the best, {best.candidate.label}, leaves {best.rms_over_noise:.3g} x "
-                   "noise" if best else "")
-            )  # fmt: skip
+                + (
+                    f"; the best, {best.candidate.label}, leaves {best.rms_over_noise:.3g} x noise"
+                    if best
+                    else ""
+                )
+            )
         if self.recommendation:
             lines.append("to separate the tied candidates: " + self.recommendation["text"])
         return "\n".join(lines)
@@ -317,15 +326,21 @@ class Diagnosis:
                 "left_out_steps": self.comparison.left_out.tolist(),
             },
             "evidence": self.evidence.to_json(),
-            "refit": None if self.refit is None else {
-                "rms_over_noise": self.refit_rms, "parameters": self.refit.parameters},
+            "refit": None
+            if self.refit is None
+            else {"rms_over_noise": self.refit_rms, "parameters": self.refit.parameters},
             "linear": [
                 {"label": f.candidate.label, "delta_bic": f.delta_bic, "values": f.values}
                 for f in self.linear[:10]
             ],
             "screen": [
-                {"label": f.candidate.label, "delta_bic": f.bic - base, "chi2_per_dof":
-                 f.chi2_per_dof, "values": f.values, "known": f.known}
+                {
+                    "label": f.candidate.label,
+                    "delta_bic": f.bic - base,
+                    "chi2_per_dof": f.chi2_per_dof,
+                    "values": f.values,
+                    "known": f.known,
+                }
                 for f in self.screen[:30]
             ],
             "rescreened": self.rescreened,
@@ -333,4 +348,4 @@ class Diagnosis:
             "group": [r.candidate.label for r in self.group],
             "recommendation": self.recommendation,
             "timings": self.timings,
-        }  # fmt: skip
+        }

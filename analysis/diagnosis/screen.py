@@ -497,9 +497,11 @@ class Screen:
             lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
             if hi > lo:
                 opt = minimize_scalar(
-                    lambda g: search({name: g}), bounds=(lo, hi), method="bounded",
+                    lambda g: search({name: g}),
+                    bounds=(lo, hi),
+                    method="bounded",
                     options={"xatol": 5e-3 * amp, "maxiter": 5},
-                )  # fmt: skip
+                )
                 if opt.fun < best_rss:
                     best_gap = float(opt.x)
             rss, n, theta, known = run({name: best_gap})
@@ -565,9 +567,15 @@ class Screen:
         cands = list(candidates)
         later = None
         if executor is not None and len(cands) > 8:
-            job = ScreenJob(self.model.to_toml(), str(self.model.source), str(self.data.path),
-                            tuple(cands[1::2]), self.predictor.settings["n_harmonics"],
-                            self.predictor.settings["n_time"], self.free)  # fmt: skip
+            job = ScreenJob(
+                self.model.to_toml(),
+                str(self.model.source),
+                str(self.data.path),
+                tuple(cands[1::2]),
+                self.predictor.settings["n_harmonics"],
+                self.predictor.settings["n_time"],
+                self.free,
+            )
             later = executor.submit(screen_pass, job)
             cands = cands[0::2]
         fits = self.first_pass(cands, progress)
@@ -610,7 +618,8 @@ class Screen:
             log.warning("screen of %s failed: %s", f.candidate.label, exc)
             return f
         out = self._refined[f.candidate.label] = dataclasses.replace(
-            g if g.bic < f.bic else f, refined=True)  # fmt: skip
+            g if g.bic < f.bic else f, refined=True
+        )
         return out
 
     # -- one fit ------------------------------------------------------------------------------
@@ -760,13 +769,12 @@ class Screen:
         return st["X_init"].copy()
 
     def _fit(self, fr, st, cand, B_loc, nonlinear: dict, param=None, n_iterations=None):
-        params = tuple(dict.fromkeys(([param] if param else []) + list(self.free)))
         """Alternate: whitening and unmeasured harmonics at the current values, then the
         linear least squares of every linear parameter. Returns (rss, n, values, known)."""
+        params = tuple(dict.fromkeys(([param] if param else []) + list(self.free)))
         bs = self._basis
         C, K = self.n_channels, bs.order_k.size
         n = self.rows.size
-        H1 = bs.H + 1
         X = self._initial_states(fr, st)
         law = None if cand is None or cand.law.kind == "none" else cand.law
         joint = cand is not None and cand.location.joint is not None
@@ -778,31 +786,11 @@ class Screen:
         known = {mp: el.params[ep] for el, _, _, pmap in fr.known for mp, ep in pmap.items()}
         W = st["W"]
         Wr = np.stack([W, W], axis=2).reshape(n, -1)  # (n, 2KC)
-        R_o = fr.R_o
-        drive = R_o[:, :, :C, 0] * self._F[self.rows][:, :, None]
+        drive = fr.R_o[:, :, :C, 0] * self._F[self.rows][:, :, None]
         other = bs.other
-        # incidences where laws act: the model's elements, then the candidate's
-        incid = []
-        for element, a, b, pmap in fr.known:
-            row = np.zeros(len(fr.dofs))
-            row[a] = 1.0
-            if b is not None:
-                row[b] = -1.0
-            incid.append(("known", element, row[None, :], pmap))
-        if law is not None or joint:
-            incid.append(("cand", law, B_loc, None))
+        incid = _incidences(fr, law, joint, B_loc)
         # per incidence: response at the sensors to a unit force (real) and state map
         maps = st.setdefault("maps", {})
-
-        def state_map(row):
-            # response at the sensors to a unit force at an incidence, and its state map
-            key = row.tobytes()
-            if key not in maps:
-                Rr = np.einsum("nkcd,d->nkc", R_o[:, :, :C, 1:], row)[:, :, :, None]
-                Pr = np.einsum("d,nkdc->nkc", row, st["P"])[:, :, None, :]
-                maps[key] = (_realify(Rr), _realify(Pr))
-            return maps[key]
-
         rss = np.inf
         its = self.n_iterations if n_iterations is None else n_iterations
         for it in range(its + 1):
@@ -810,97 +798,163 @@ class Screen:
             # and Jacobian vanish and the whitening is the model's own elements': computed
             # once per location, shared by every law there
             whitened = it == 0 and "S0" in st
-            g_total = np.zeros((n, H1, len(fr.dofs)), complex)
-            M = None if whitened else np.zeros((n, 2 * K * C, 2 * K * C))
-            columns, names, lower = [], [], []
+            lin = _Forces(
+                np.zeros((n, bs.H + 1, len(fr.dofs)), complex),
+                None if whitened else np.zeros((n, 2 * K * C, 2 * K * C)),
+            )
             for i, (kind_, law_i, rows, pmap) in enumerate(incid):
                 Xi = X @ rows.T
                 if kind_ == "known":
-                    th = {ep: known[mp] for mp, ep in pmap.items()}
-                    ck = ("known", id(st), i)
-                    if it == 0 and ck in st:
-                        f, Jm, basis = st[ck]
-                    else:
-                        f, Jm, basis = self._law_eval(fr, law_i, Xi, th, True)
-                        if it == 0:
-                            st[ck] = (f, Jm, basis)
-                    for mp, ep in pmap.items():
-                        columns.append(basis[ep] @ rows)
-                        names.append(("known_delta" if ep == "gap" else "known", mp))
-                        lower.append(-np.inf if ep == "gap" else 0.0)
+                    f, Jm = self._known_force(fr, st, i, law_i, Xi, rows, pmap, known, it, lin)
                 else:
-                    f = np.zeros_like(Xi)
-                    Jm = np.zeros((n, rows.shape[0], 2 * K, 2 * K))
-                    if law is not None and law.kind != "joint_spring":
-                        th = {p: theta[p] for p in (*law.linear, *law.nonlinear)}
-                        f, Jm_c, basis = self._law_eval(fr, law, Xi, th, True, it > 0)
-                        Jm = Jm if Jm_c is None else Jm_c
-                        for p in law.linear:
-                            columns.append(basis[p] @ rows)
-                            names.append(("cand", p))
-                            lower.append(0.0 if p in law.nonnegative else -np.inf)
-                    if joint:
-                        sp = Law("linear_spring")
-                        fs, Js, bsp = self._law_eval(
-                            fr, sp, Xi, {"k": theta["k_joint_delta"]}, True
-                        )
-                        f, Jm = f + fs, Jm + Js
-                        columns.append(bsp["k"] @ rows)
-                        names.append(("cand", "k_joint_delta"))
-                        lower.append(-np.inf)
-                g_total += f @ rows
+                    f, Jm = self._candidate_force(fr, Xi, rows, law, joint, theta, it, lin)
+                lin.g += f @ rows
                 if whitened or (it == 0 and kind_ == "cand"):
                     continue
                 for j, row in enumerate(rows):
-                    Rr, Pr = state_map(row)
-                    M += Rr @ Jm[:, j] @ Pr
+                    Rr, Pr = self._state_map(fr, st, maps, row)
+                    lin.M += Rr @ Jm[:, j] @ Pr
             if it > 0 and other.size:
                 # unmeasured harmonics follow the laws: U_h = R_DD(h W) g_h
-                X[:, other] = np.einsum("nhij,nhj->nhi", fr.R[:, other, :, 1:], g_total[:, other])
+                X[:, other] = np.einsum("nhij,nhj->nhi", fr.R[:, other, :, 1:], lin.g[:, other])
             if whitened:
                 S = st["S0"]
             else:
-                M *= Wr[:, :, None]
-                S = np.linalg.inv(np.eye(2 * K * C)[None] - M)
+                lin.M *= Wr[:, :, None]
+                S = np.linalg.inv(np.eye(2 * K * C)[None] - lin.M)
                 if it == 0:
                     st["S0"] = S
-            # the data's residual and each column's response at the sensors, whitened at once
-            Ro = R_o[:, :, :C, 1:]
-            cols = np.stack([g_total[:, bs.order_k], *(c[:, bs.order_k] for c in columns)], -1)
-            r = np.matmul(Ro, cols) * W[..., None]  # (n, K, C, 1 + columns)
-            r[..., 0] = (st["Y"] - drive) * W - r[..., 0]
-            fo = np.concatenate([self._F[self.rows][:, :, None], g_total[:, bs.order_k]], axis=2)
-            extra = []
-            for name in params:
-                dR = self._param_derivative(fr, name)  # (n, K, C, 1 + nD)
-                extra.append(np.einsum("nkij,nkj->nki", dR, fo) * W)
-                names.append(("param", name))
-                lower.append(-np.inf)
-            if extra:
-                r = np.concatenate([r, np.stack(extra, -1)], axis=-1)
-            q = r.shape[-1]
-            # real coefficients in the order of _vec: (order, cos/sin, channel)
-            V = np.stack([r.real, -r.imag], axis=2).reshape(n, 2 * K * C, q)
-            Z = np.matmul(S, V)
-            y0 = Z[:, :, 0].ravel()
+            Am, y0 = self._whitened_system(fr, st, S, W, drive, lin, params)
             cur = np.array(
-                [known[nm] if kd == "known" else theta.get(nm, 0.0) if kd == "cand" else 0.0
-                 for kd, nm in names]
-            )  # fmt: skip
-            Am = Z[:, :, 1:].reshape(n * 2 * K * C, q - 1)
-            x, rss = _bounded_lsq(Am, y0 + Am @ cur, np.array(lower, float))
-            for (kd, nm), v in zip(names, x, strict=True):
-                if kd == "known":
-                    known[nm] = max(float(v), 0.0)
-                elif kd == "known_delta":
-                    known[nm] = max(float(known[nm] + v), 0.0)
-                elif kd == "param":
-                    theta[nm] = theta.get(nm, 0.0) + float(v)
-                else:
-                    theta[nm] = float(v)
+                [
+                    known[nm] if kd == "known" else theta.get(nm, 0.0) if kd == "cand" else 0.0
+                    for kd, nm in lin.names
+                ]
+            )
+            x, rss = _bounded_lsq(Am, y0 + Am @ cur, np.array(lin.lower, float))
+            _take_values(lin.names, x, known, theta)
             if it == its:
                 break
         return rss, 2 * K * C * n, theta, known
+
+    def _state_map(self, fr: _Frame, st: dict, maps: dict, row: np.ndarray):
+        """Response at the sensors to a unit force at an incidence, and its state map."""
+        key = row.tobytes()
+        if key not in maps:
+            C = self.n_channels
+            Rr = np.einsum("nkcd,d->nkc", fr.R_o[:, :, :C, 1:], row)[:, :, :, None]
+            Pr = np.einsum("d,nkdc->nkc", row, st["P"])[:, :, None, :]
+            maps[key] = (_realify(Rr), _realify(Pr))
+        return maps[key]
+
+    def _known_force(self, fr, st, i: int, element, Xi, rows, pmap, known, it: int, lin):
+        """A model element's force and Jacobian at the states (kept from the first iteration
+        at the data's states, which every law at the location shares); its linear parameters'
+        columns added to ``lin``."""
+        th = {ep: known[mp] for mp, ep in pmap.items()}
+        ck = ("known", id(st), i)
+        if it == 0 and ck in st:
+            f, Jm, basis = st[ck]
+        else:
+            f, Jm, basis = self._law_eval(fr, element, Xi, th, True)
+            if it == 0:
+                st[ck] = (f, Jm, basis)
+        for mp, ep in pmap.items():
+            lin.columns.append(basis[ep] @ rows)
+            lin.names.append(("known_delta" if ep == "gap" else "known", mp))
+            lin.lower.append(-np.inf if ep == "gap" else 0.0)
+        return f, Jm
+
+    def _candidate_force(self, fr, Xi, rows, law, joint: bool, theta: dict, it: int, lin):
+        """The candidate's force and Jacobian (its law's, and a joint's spring change); its
+        linear parameters' columns added to ``lin``."""
+        K = self._basis.order_k.size
+        f = np.zeros_like(Xi)
+        Jm = np.zeros((self.rows.size, rows.shape[0], 2 * K, 2 * K))
+        if law is not None and law.kind != "joint_spring":
+            th = {p: theta[p] for p in (*law.linear, *law.nonlinear)}
+            f, Jm_c, basis = self._law_eval(fr, law, Xi, th, True, it > 0)
+            Jm = Jm if Jm_c is None else Jm_c
+            for p in law.linear:
+                lin.columns.append(basis[p] @ rows)
+                lin.names.append(("cand", p))
+                lin.lower.append(0.0 if p in law.nonnegative else -np.inf)
+        if joint:
+            sp = Law("linear_spring")
+            fs, Js, bsp = self._law_eval(fr, sp, Xi, {"k": theta["k_joint_delta"]}, True)
+            f, Jm = f + fs, Jm + Js
+            lin.columns.append(bsp["k"] @ rows)
+            lin.names.append(("cand", "k_joint_delta"))
+            lin.lower.append(-np.inf)
+        return f, Jm
+
+    def _whitened_system(self, fr, st, S, W, drive, lin: _Forces, params):
+        """The data's residual and each column's response at the sensors, whitened at once
+        (the free parameters' derivatives appended to ``lin``); returns the least-squares
+        matrix and right-hand side at zero change."""
+        bs = self._basis
+        C, K = self.n_channels, bs.order_k.size
+        n = self.rows.size
+        Ro = fr.R_o[:, :, :C, 1:]
+        cols = np.stack([lin.g[:, bs.order_k], *(c[:, bs.order_k] for c in lin.columns)], -1)
+        r = np.matmul(Ro, cols) * W[..., None]  # (n, K, C, 1 + columns)
+        r[..., 0] = (st["Y"] - drive) * W - r[..., 0]
+        fo = np.concatenate([self._F[self.rows][:, :, None], lin.g[:, bs.order_k]], axis=2)
+        extra = []
+        for name in params:
+            dR = self._param_derivative(fr, name)  # (n, K, C, 1 + nD)
+            extra.append(np.einsum("nkij,nkj->nki", dR, fo) * W)
+            lin.names.append(("param", name))
+            lin.lower.append(-np.inf)
+        if extra:
+            r = np.concatenate([r, np.stack(extra, -1)], axis=-1)
+        q = r.shape[-1]
+        # real coefficients in the order of _vec: (order, cos/sin, channel)
+        V = np.stack([r.real, -r.imag], axis=2).reshape(n, 2 * K * C, q)
+        Z = np.matmul(S, V)
+        y0 = Z[:, :, 0].ravel()
+        Am = Z[:, :, 1:].reshape(n * 2 * K * C, q - 1)
+        return Am, y0
+
+
+@dataclass
+class _Forces:
+    """One iteration of :meth:`Screen._fit`: the laws' total force phasors, the whitening's
+    sum of state maps (``None`` when the stored whitening is used) and the columns of the
+    linear parameters, with their names and lower bounds."""
+
+    g: np.ndarray
+    M: np.ndarray | None
+    columns: list = field(default_factory=list)
+    names: list = field(default_factory=list)
+    lower: list = field(default_factory=list)
+
+
+def _incidences(fr: _Frame, law, joint: bool, B_loc) -> list:
+    """Where laws act: the model's elements, then the candidate's."""
+    incid = []
+    for element, a, b, pmap in fr.known:
+        row = np.zeros(len(fr.dofs))
+        row[a] = 1.0
+        if b is not None:
+            row[b] = -1.0
+        incid.append(("known", element, row[None, :], pmap))
+    if law is not None or joint:
+        incid.append(("cand", law, B_loc, None))
+    return incid
+
+
+def _take_values(names, x, known: dict, theta: dict) -> None:
+    """The least squares' solution into the model's elements' values and the candidate's."""
+    for (kd, nm), v in zip(names, x, strict=True):
+        if kd == "known":
+            known[nm] = max(float(v), 0.0)
+        elif kd == "known_delta":
+            known[nm] = max(float(known[nm] + v), 0.0)
+        elif kd == "param":
+            theta[nm] = theta.get(nm, 0.0) + float(v)
+        else:
+            theta[nm] = float(v)
 
 
 @dataclass(frozen=True)

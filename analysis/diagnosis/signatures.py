@@ -87,11 +87,16 @@ class Evidence:
         return {
             "families": list(self.families),
             "findings": [
-                {"name": f.name, "significant": f.significant, "text": f.text,
-                 "values": f.values, "points_at": list(f.points_at)}
+                {
+                    "name": f.name,
+                    "significant": f.significant,
+                    "text": f.text,
+                    "values": f.values,
+                    "points_at": list(f.points_at),
+                }
                 for f in self.findings
             ],
-        }  # fmt: skip
+        }
 
 
 def _levels(cmp: Comparison) -> list[float]:
@@ -122,35 +127,54 @@ def _resonance(cmp: Comparison, channel: int) -> list[Finding]:
     word = "upwards" if sign > 0 else "downwards"
     text = (
         f"resonance (largest fundamental response at {cmp.channels[channel]}): measured "
-        + ", ".join(f"{v:.2f}" for v in fm) + " Hz, model " + ", ".join(f"{v:.2f}" for v in fp)
+        + ", ".join(f"{v:.2f}" for v in fm)
+        + " Hz, model "
+        + ", ".join(f"{v:.2f}" for v in fp)
         + f" Hz at {', '.join(f'{lv:g}' for lv in levels)} N: the measurement moves "
         + (f"{abs(sign):.2f} Hz {word} beyond the model" if sig else "as the model does")
-    )  # fmt: skip
-    out = [Finding("resonance_shift", sig, text,
-                   {"levels_n": levels, "measured_hz": fm.tolist(), "model_hz": fp.tolist()},
-                   ("hardening",) if sign > 0 else ("softening",))]  # fmt: skip
+    )
+    out = [
+        Finding(
+            "resonance_shift",
+            sig,
+            text,
+            {"levels_n": levels, "measured_hz": fm.tolist(), "model_hz": fp.tolist()},
+            ("hardening",) if sign > 0 else ("softening",),
+        )
+    ]
     rel_m, rel_p = hm / hm[0], hp / hp[0]
     ratio = rel_m / rel_p
     sig_h = bool(np.nanmax(np.abs(np.log(ratio))) > 0.05) if len(levels) > 1 else False
     trend = float(np.log(ratio[-1])) if len(levels) > 1 else 0.0
     text = (
         "normalised peak height relative to the lowest level: measured "
-        + ", ".join(f"{v:.3f}" for v in rel_m) + ", model " + ", ".join(f"{v:.3f}" for v in rel_p)
-        + (": the measured peak falls faster than the model's (amplitude-dependent damping)"
-           if sig_h and trend < 0 else
-           ": the measured peak rises against the model's (friction-like softening)"
-           if sig_h else ": as the model")
-    )  # fmt: skip
-    out.append(Finding("peak_height", sig_h, text,
-                       {"measured": rel_m.tolist(), "model": rel_p.tolist()},
-                       ("damping",) if trend < 0 else ("softening",)))  # fmt: skip
+        + ", ".join(f"{v:.3f}" for v in rel_m)
+        + ", model "
+        + ", ".join(f"{v:.3f}" for v in rel_p)
+        + (
+            ": the measured peak falls faster than the model's (amplitude-dependent damping)"
+            if sig_h and trend < 0
+            else ": the measured peak rises against the model's (friction-like softening)"
+            if sig_h
+            else ": as the model"
+        )
+    )
+    out.append(
+        Finding(
+            "peak_height",
+            sig_h,
+            text,
+            {"measured": rel_m.tolist(), "model": rel_p.tolist()},
+            ("damping",) if trend < 0 else ("softening",),
+        )
+    )
     return out
 
 
 def _growth(cmp: Comparison, sigma: np.ndarray, gate: float) -> list[Finding]:
     """Median growth exponent of each order over the levels, measured and model."""
     levels = np.array(_levels(cmp))
-    out = []
+    out: list[Finding] = []
     if levels.size < 2:
         return out
     freqs = np.unique(np.round(cmp.frequency_hz, 6))
@@ -178,17 +202,28 @@ def _growth(cmp: Comparison, sigma: np.ndarray, gate: float) -> list[Finding]:
         text = (
             f"order {order}: growth exponent d log|Y| / d log F {gm:.2f} measured, {gp:.2f} "
             f"model over {len(em)} gated (frequency, sensor) pairs"
-            + (" -- the measurement grows faster" if sig and gm > gp else
-               " -- the measurement grows slower" if sig else "")
-        )  # fmt: skip
-        points = ()
+            + (
+                " -- the measurement grows faster"
+                if sig and gm > gp
+                else " -- the measurement grows slower"
+                if sig
+                else ""
+            )
+        )
+        points: tuple[str, ...] = ()
         if sig and order == "2":
             points = ("even",)
         elif sig and order == "3":
             points = ("hardening",) if gm > gp else ("softening", "damping")
-        out.append(Finding(f"growth_order_{order}", sig, text,
-                           {"order": order, "measured": gm, "model": gp, "n": len(em)},
-                           points))  # fmt: skip
+        out.append(
+            Finding(
+                f"growth_order_{order}",
+                sig,
+                text,
+                {"order": order, "measured": gm, "model": gp, "n": len(em)},
+                points,
+            )
+        )
     return out
 
 
@@ -203,8 +238,7 @@ def _distortion(cmp: Comparison, linear: np.ndarray, gate: float) -> Finding:
         f"distortion where the model predicts none: {n_bad} of {n} higher-order values at "
         f"steps where the model is linear exceed {gate:g} standard errors"
     )
-    return Finding("distortion", sig, text, {"n_exceeding": n_bad, "n": n},
-                   ("hardening", "even"))  # fmt: skip
+    return Finding("distortion", sig, text, {"n_exceeding": n_bad, "n": n}, ("hardening", "even"))
 
 
 def _linear_misfit(cmp: Comparison, linear: np.ndarray) -> Finding:
@@ -219,8 +253,9 @@ def _linear_misfit(cmp: Comparison, linear: np.ndarray) -> Finding:
         f"is linear): fundamental rms {rms:.2f} standard errors"
         + (" -- the linear model is in error" if sig else "")
     )
-    return Finding("linear_misfit", sig, text, {"rms_sigma": rms, "n_steps": int(m.sum())},
-                   ("linear",))  # fmt: skip
+    return Finding(
+        "linear_misfit", sig, text, {"rms_sigma": rms, "n_steps": int(m.sum())}, ("linear",)
+    )
 
 
 def find_signatures(

@@ -32,8 +32,15 @@ from analysis.measurement_file import read_measurement
 from analysis.model import Model
 from analysis.predict_branches import BranchMatchedPredictor
 
-__all__ = ["VerifyJob", "Verified", "band_modes", "calibration_rows", "damping_parameters",
-           "run_verify", "start_distributions"]  # fmt: skip
+__all__ = [
+    "VerifyJob",
+    "Verified",
+    "band_modes",
+    "calibration_rows",
+    "damping_parameters",
+    "run_verify",
+    "start_distributions",
+]
 
 #: Laws that act at rest (their tangent at zero motion is a damper): the linear test's modal
 #: damping already holds their share, so a candidate with one recalibrates that damping too.
@@ -249,8 +256,11 @@ def _scaled_starts(job: VerifyJob, model: Model) -> list[dict[str, float]]:
     if not cand.location.unmeasured:
         return []
     names = cand.parameter_names()
-    coeffs = {names[p]: job.values[p] for p in cand.law.linear
-              if p in job.values and names[p] in model.parameters}  # fmt: skip
+    coeffs = {
+        names[p]: job.values[p]
+        for p in cand.law.linear
+        if p in job.values and names[p] in model.parameters
+    }
     if not coeffs or not any(coeffs.values()):
         return []
     return [{n: v * f for n, v in coeffs.items()} for f in UNMEASURED_START_FACTORS]
@@ -266,8 +276,15 @@ def run_verify(job: VerifyJob) -> Verified:
     except Exception as exc:  # a worker must return, whatever the candidate does
         label = "the model" if job.candidate is None else job.candidate.label
         log.warning("verification of %s failed: %s", label, exc)
-        v = Verified(job.candidate, {}, np.full(0, np.nan), 1, "", message=str(exc),
-                     seconds=time.perf_counter() - t0)  # fmt: skip
+        v = Verified(
+            job.candidate,
+            {},
+            np.full(0, np.nan),
+            1,
+            "",
+            message=str(exc),
+            seconds=time.perf_counter() - t0,
+        )
     v.cpu_seconds = time.process_time() - c0
     return v
 
@@ -308,12 +325,23 @@ def _verify(job: VerifyJob, t0: float) -> Verified:
     message = ""
     try:
         r = refit(
-            m2, data, names, rows=rows if rows.size else None, starts=_scaled_starts(job, m2),
-            distributions=dists, n_random_starts=job.n_starts, seed=job.seed,
-            max_iterations=job.max_iterations, ftol=1e-4, n_harmonics=job.n_harmonics,
-            n_time=job.n_time, max_seconds=job.max_seconds, give_up_chi2=job.give_up_chi2,
-            reweight_passes=job.reweight_passes, reweight_drop=job.reweight_drop,
-        )  # fmt: skip
+            m2,
+            data,
+            names,
+            rows=rows if rows.size else None,
+            starts=_scaled_starts(job, m2),
+            distributions=dists,
+            n_random_starts=job.n_starts,
+            seed=job.seed,
+            max_iterations=job.max_iterations,
+            ftol=1e-4,
+            n_harmonics=job.n_harmonics,
+            n_time=job.n_time,
+            max_seconds=job.max_seconds,
+            give_up_chi2=job.give_up_chi2,
+            reweight_passes=job.reweight_passes,
+            reweight_drop=job.reweight_drop,
+        )
         fitted, history, params = r.model, r.history, r.parameters
         message = r.lm.message if r.lm is not None else ""
     except (RuntimeError, ValueError) as exc:

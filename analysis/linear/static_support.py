@@ -17,6 +17,7 @@ parameters follow from the same formula.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -25,10 +26,10 @@ __all__ = ["StaticSupport"]
 
 @dataclass
 class _SupportedBlock:
-    inner: object
-    to_drive: object
-    from_drive: object
-    drive: object
+    inner: Any
+    to_drive: Any
+    from_drive: Any
+    drive: Any
     stiffness: float
     _static: tuple | None = field(default=None, init=False, repr=False, compare=False)
 

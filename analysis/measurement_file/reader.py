@@ -185,7 +185,8 @@ class _Checker(FileChecker):
                 f"complete {complete} with exit_status {status!r}",
                 "complete",
             )
-        output_at_zero, resumes = None, ()
+        output_at_zero = None
+        resumes: tuple[ResumeEvent, ...] = ()
         if version >= 2:
             output_at_zero = self.attr_bool(f, "output_at_zero")
             resumes = self.resumes()
@@ -420,7 +421,7 @@ class _Checker(FileChecker):
             self.fail(freq.name, "shape (nf,)", f"shape {freq.shape}")
         nf, nc = freq.shape[0], len(channels)
         shapes = {"h1": (nf, nc), "coherence": (nf, nc), "force_psd": (nf,)}
-        values = {}
+        values: dict[str, Any] = {}
         for field, (loc, attribute) in _FRF_PLACES.items():
             if attribute == "n_averages":
                 values[field] = self.attr_int(frf, attribute, minimum=1)

@@ -92,7 +92,7 @@ class ChannelInfo:
         name = check_text(self.name, owner="ChannelInfo", field="name")
         if not name.strip():
             raise FieldValueError("ChannelInfo", "name", "a non-empty name", repr(name))
-        fix = {
+        fix: dict[str, Any] = {
             "point": check_int(self.point, owner=owner, field="point", minimum=0),
             "direction": check_text(
                 self.direction, owner=owner, field="direction", allowed=DIRECTIONS
@@ -478,7 +478,7 @@ class RandomFRF:
         h1 = check_array(self.h1, dtype="complex128", shape=(nf, None), owner=o, field="h1")
         if h1.shape[1] == 0:
             raise FieldValueError(o, "h1", "at least one channel column", f"shape {h1.shape}")
-        fix = {
+        fix: dict[str, Any] = {
             "frequency_hz": freq,
             "h1": h1,
             "coherence": check_array(

@@ -38,6 +38,7 @@ from .schema import (
     FINAL_STATUSES,
     FORMAT_VERSION,
     KIND_STEPPED_SINE,
+    ArraySpec,
     FieldValueError,
     MeasurementFileError,
     check_array,
@@ -273,6 +274,17 @@ class SteppedSineWriter:
     never lost.
     """
 
+    _path: Path
+    _file: h5py.File | None
+    _channels: tuple[ChannelInfo, ...]
+    _n_levels: int
+    _n_orders: int
+    _n_extra: int
+    _fields: tuple[ArraySpec, ...]
+    _drive: int
+    _completed: set[int]
+    _n: int
+
     def __init__(self) -> None:
         raise TypeError("use create_stepped_sine() or open_for_resume() to get a writer")
 
@@ -284,7 +296,9 @@ class SteppedSineWriter:
         self._path = path
         self._file = f
         if data is None:
-            data = load_open_file(f, path)
+            loaded = load_open_file(f, path)
+            assert isinstance(loaded, SteppedSineData)  # the writers open stepped-sine files
+            data = loaded
         self._channels = data.channels
         self._n_levels = int(data.levels_n.size)
         self._n_orders = int(data.orders_num.size)
@@ -380,10 +394,11 @@ class SteppedSineWriter:
             self._reject(f"/steps/{exc.field}", exc.expected, exc.found)
         extra = None if record.extra_force is None else record.extra_force.shape
         if extra != ((self._n_extra,) if self._n_extra else None):
-            want = (
+            expected = (
                 f"shape ({self._n_extra},) per step" if self._n_extra else "none (no /extra_orders)"
             )
-            self._reject("/steps/extra_force", want, "none" if extra is None else f"shape {extra}")
+            found = "none" if extra is None else f"shape {extra}"
+            self._reject("/steps/extra_force", expected, found)
         return {spec.name: getattr(record, spec.field) for spec in self._fields}
 
     def _reject(self, location: str, expected: str, found: str) -> NoReturn:

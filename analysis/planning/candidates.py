@@ -114,7 +114,9 @@ class FrequencyRange:
 
     def refined(self, band_hz: tuple[float, float], step_hz: float) -> FrequencyRange:
         """The same range with ``step_hz`` steps added inside ``band_hz``."""
-        return FrequencyRange(self.start_hz, self.stop_hz, self.step_hz, tuple(band_hz), step_hz)
+        return FrequencyRange(
+            self.start_hz, self.stop_hz, self.step_hz, (band_hz[0], band_hz[1]), step_hz
+        )
 
     @property
     def label(self) -> str:

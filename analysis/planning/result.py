@@ -264,9 +264,10 @@ class PlanResult:
         t = self.timings
         lines.append("")
         lines.append(
-            "time: " + ", ".join(f"{k} {v:.2f} s" for k, v in t.items())
+            "time: "
+            + ", ".join(f"{k} {v:.2f} s" for k, v in t.items())
             + (f"; {self.failed_steps} unconverged steps" if self.failed_steps else "")
-        )  # fmt: skip
+        )
         return "\n".join(lines)
 
 

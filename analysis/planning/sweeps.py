@@ -140,8 +140,7 @@ def _model(text: str, f_max_hz: float) -> tuple[str, Model, object]:
 
 def _problem(job: SweepJob):
     digest, model, linear = _model(job.model_toml, job.f_max_hz)
-    key = (digest, job.f_max_hz, job.actuator, job.sensors, job.orders, job.n_harmonics,
-           job.n_time)  # fmt: skip
+    key = (digest, job.f_max_hz, job.actuator, job.sensors, job.orders, job.n_harmonics, job.n_time)
     if key not in _problems:
         problem = build_problem(
             model,
@@ -193,8 +192,10 @@ def run_sweep(job: SweepJob) -> SweepSensitivities:
     if failed:
         log.warning(
             "sweep at actuator %d, %.3g N: %d step(s) did not converge and carry no information",
-            job.actuator, abs(force[0]), len(failed),
-        )  # fmt: skip
+            job.actuator,
+            abs(force[0]),
+            len(failed),
+        )
     return SweepSensitivities(
         key=tuple(job.key),
         frequency_hz=f[keep],

@@ -199,7 +199,7 @@ def parameter_rows(
                 None
                 if _number(std_noise.get(name)) is None
                 else _number(std_noise.get(name)) * factor
-            ),  # fmt: skip
+            ),
             low=None if low is None else low * factor,
             high=None if high is None else high * factor,
             interval_source=interval_source,
@@ -290,8 +290,9 @@ def _report_figures(folder: Path, cal: dict, cv: dict | None, units: dict) -> li
             }
         )
     elif (folder / "convergence.png").exists():
-        figs.append({"src": folder / "convergence.png", "caption": "Levenberg-Marquardt "
-                     "convergence."})  # fmt: skip
+        figs.append(
+            {"src": folder / "convergence.png", "caption": "Levenberg-Marquardt convergence."}
+        )
     try:
         est = np.array(cv["estimates"], dtype=float) if cv else None
         ok = est is not None and est.ndim == 2 and est.shape[1] == len(cv["names"])

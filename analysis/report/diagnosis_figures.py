@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -30,7 +31,7 @@ __all__ = [
     "plot_sensor_order_level_map",
 ]
 
-_NORM = {"vmin": 0.5, "vmax": 300.0}
+_NORM: dict[str, Any] = {"vmin": 0.5, "vmax": 300.0}
 
 
 def _save(fig, path) -> Path:
@@ -55,8 +56,15 @@ def _sensor_order_level(ax_row, cmp, title: str = ""):
             for j in range(rms.shape[2]):
                 v = rms[i, k, j]
                 if np.isfinite(v):
-                    ax.text(j, i, f"{v:.3g}", ha="center", va="center", fontsize=7,
-                            color="white" if v > 20 else "black")  # fmt: skip
+                    ax.text(
+                        j,
+                        i,
+                        f"{v:.3g}",
+                        ha="center",
+                        va="center",
+                        fontsize=7,
+                        color="white" if v > 20 else "black",
+                    )
     return im
 
 
@@ -82,8 +90,9 @@ def _frequency_level(ax, cmp):
     for i, f in enumerate(np.round(cmp.frequency_hz, 6)):
         img[levels.index(cmp.level_n[i]), np.searchsorted(freqs, f)] = z[i]
     edges = np.concatenate([[freqs[0] - 0.05], (freqs[1:] + freqs[:-1]) / 2, [freqs[-1] + 0.05]])
-    im = ax.pcolormesh(edges, np.arange(len(levels) + 1) - 0.5, img, norm=LogNorm(**_NORM),
-                       cmap="magma_r")  # fmt: skip
+    im = ax.pcolormesh(
+        edges, np.arange(len(levels) + 1) - 0.5, img, norm=LogNorm(**_NORM), cmap="magma_r"
+    )
     ax.set_yticks(range(len(levels)), [f"{lv:g} N" for lv in levels])
     ax.set_xlabel("frequency [Hz]")
     return im
@@ -105,8 +114,10 @@ def plot_measured_vs_model_levels(cmp, path: str | Path, *, title: str = "") -> 
         m = cmp.level_n == lv
         order = np.argsort(cmp.frequency_hz[m])
         curves[f"{lv:g} N"] = (
-            cmp.frequency_hz[m][order], cmp.measured[m][order], cmp.predicted[m][order]
-        )  # fmt: skip
+            cmp.frequency_hz[m][order],
+            cmp.measured[m][order],
+            cmp.predicted[m][order],
+        )
     return plot_measured_vs_model(curves, cmp.channels, cmp.orders, path, title=title)
 
 
@@ -135,8 +146,9 @@ def plot_before_after(before, after, path: str | Path, *, title: str = "") -> Pa
         axes[0].set_ylabel(f"{name}: {cmp.rms_over_noise:.3g} x noise", fontsize=9)
         ax = fig.add_subplot(gs[2 + r, :])
         _frequency_level(ax, cmp)
-        ax.set_title(f"{name} ({cmp.rms_over_noise:.3g} x noise), by frequency and level",
-                     fontsize=9)  # fmt: skip
+        ax.set_title(
+            f"{name} ({cmp.rms_over_noise:.3g} x noise), by frequency and level", fontsize=9
+        )
     fig.colorbar(im, ax=fig.axes, label="rms residual / noise", shrink=0.6)
     if title:
         fig.suptitle(title)
@@ -159,15 +171,17 @@ def plot_evidence(evidence, path: str | Path, *, title: str = "") -> Path:
     peak = found.get("peak_height")
     if peak is not None and peak.values and res is not None:
         lv = res.values["levels_n"]
-        _by_level(axes[1], lv, peak.values["measured"], peak.values["model"],
-                  "peak |H1| / lowest level's")  # fmt: skip
+        _by_level(
+            axes[1], lv, peak.values["measured"], peak.values["model"], "peak |H1| / lowest level's"
+        )
     axes[1].set_title("normalised peak height", fontsize=9)
     growth = [f for f in evidence.findings if f.name.startswith("growth")]
     if growth:
         labels = [f.values.get("order", "?") for f in growth]
         x = np.arange(len(growth))
-        axes[2].bar(x - 0.2, [f.values.get("measured", np.nan) for f in growth], 0.4,
-                    label="measured")  # fmt: skip
+        axes[2].bar(
+            x - 0.2, [f.values.get("measured", np.nan) for f in growth], 0.4, label="measured"
+        )
         axes[2].bar(x + 0.2, [f.values.get("model", np.nan) for f in growth], 0.4, label="model")
         axes[2].set_xticks(x, [f"order {o}" for o in labels])
         axes[2].set_ylabel("d log|Y| / d log F")
@@ -195,18 +209,24 @@ def plot_ranking(diagnosis, path: str | Path, *, title: str = "") -> Path:
     """The verified candidates: residual over noise after everything was recalibrated (bars,
     log scale) and delta BIC against the recalibrated model; the tied group highlighted."""
     ranking = diagnosis.ranking
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 0.45 * max(len(ranking), 2) + 1.8),
-                                   sharey=True)  # fmt: skip
+    fig, (ax1, ax2) = plt.subplots(
+        1, 2, figsize=(12, 0.45 * max(len(ranking), 2) + 1.8), sharey=True
+    )
     labels = [r.candidate.label for r in ranking]
     y = np.arange(len(ranking))
-    colours = ["C2" if r.group == 1 and diagnosis.verdict == "explained" else "C0"
-               for r in ranking]  # fmt: skip
+    colours = ["C2" if r.group == 1 and diagnosis.verdict == "explained" else "C0" for r in ranking]
     ax1.barh(y, [r.rms_over_noise for r in ranking], color=colours)
-    ax1.axvline(diagnosis.settings.explained_rms, color="0.3", ls="--", lw=1,
-                label="explained below")  # fmt: skip
+    ax1.axvline(
+        diagnosis.settings.explained_rms, color="0.3", ls="--", lw=1, label="explained below"
+    )
     if diagnosis.refit is not None:
-        ax1.axvline(diagnosis.refit_rms, color="C3", ls=":", lw=1.5,
-                    label="model, own parameters recalibrated")  # fmt: skip
+        ax1.axvline(
+            diagnosis.refit_rms,
+            color="C3",
+            ls=":",
+            lw=1.5,
+            label="model, own parameters recalibrated",
+        )
     ax1.set_xscale("log")
     ax1.set_yticks(y, labels, fontsize=8)
     ax1.invert_yaxis()
@@ -226,12 +246,15 @@ def plot_diagnosis(diagnosis, folder: str | Path) -> list[Path]:
     folder.mkdir(parents=True, exist_ok=True)
     cmp = diagnosis.comparison
     out = [
-        plot_sensor_order_level_map(cmp, folder / "residual_sensor_order_level.png",
-                                    title=f"model vs file: {cmp.rms_over_noise:.3g} x noise"),
+        plot_sensor_order_level_map(
+            cmp,
+            folder / "residual_sensor_order_level.png",
+            title=f"model vs file: {cmp.rms_over_noise:.3g} x noise",
+        ),
         plot_frequency_level_map(cmp, folder / "residual_frequency_level.png"),
         plot_measured_vs_model_levels(cmp, folder / "measured_vs_model.png"),
         plot_evidence(diagnosis.evidence, folder / "evidence.png"),
-    ]  # fmt: skip
+    ]
     if diagnosis.ranking:
         out.append(plot_ranking(diagnosis, folder / "ranking.png"))
     return out

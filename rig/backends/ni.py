@@ -225,6 +225,11 @@ class NiDaqBackend:
     0 V first).
     """
 
+    # the output buffer's run state (set by _reset_run_state)
+    _next_index: int
+    _carry: np.ndarray | None
+    _logged_period: int
+
     name = "ni"
 
     def __init__(
@@ -783,7 +788,7 @@ class NiDaqBackend:
         self._w = 0
         self._written_steady = 0
         self._next_index = 0
-        self._carry: np.ndarray | None = None
+        self._carry = None
         self._logged_period = 0
 
     def _buffer_clean(self) -> bool:

@@ -354,9 +354,13 @@ class ForceController:
         gain = self._gain_matrix(initial_gain)
         prior = self._prior_covariance(gain)
         self._state = _StepState(
-            targets, gain.copy(), gain.copy(), prior, prior.copy(),
+            targets,
+            gain.copy(),
+            gain.copy(),
+            prior,
+            prior.copy(),
             radius=self.settings.max_step_ratio,
-        )  # fmt: skip
+        )
         if initial_drive_v is None:
             drive = np.linalg.solve(gain, targets)
         else:

@@ -64,6 +64,11 @@ class AcquisitionPanel(QtWidgets.QWidget):
         self.controller_label = QtWidgets.QLabel(f"runs on: {self.controller.description}")
         self.controller_label.setStyleSheet("color: #555555;")
 
+        self._lay_out()
+        self._connect()
+
+    def _lay_out(self) -> None:
+        """The setup panel on the left; the controls, plots and status on the right."""
         left = QtWidgets.QWidget()
         lv = QtWidgets.QVBoxLayout(left)
         lv.setContentsMargins(0, 0, 0, 0)
@@ -87,6 +92,9 @@ class AcquisitionPanel(QtWidgets.QWidget):
         layout.setContentsMargins(4, 4, 4, 4)
         layout.addWidget(split)
 
+    def _connect(self) -> None:
+        """The redraw timer, the buttons and the controller's signals; what the controller
+        cannot supply said where it would show."""
         self._timer = QtCore.QTimer(self)
         self._timer.setInterval(REDRAW_MS)
         self._timer.timeout.connect(self.redraw)

@@ -57,10 +57,10 @@ class DiagnosisView(QtWidgets.QWidget):
         header = self.ranking.horizontalHeader()
         header.setSectionResizeMode(QtWidgets.QHeaderView.ResizeMode.ResizeToContents)
         header.setStretchLastSection(True)
-        self.screen = QtWidgets.QTableWidget(0, 3)
-        self.screen.setHorizontalHeaderLabels(["ΔBIC (screen)", "candidate", "estimate"])
-        self.screen.verticalHeader().hide()
-        sh = self.screen.horizontalHeader()
+        self.screen_table = QtWidgets.QTableWidget(0, 3)
+        self.screen_table.setHorizontalHeaderLabels(["ΔBIC (screen)", "candidate", "estimate"])
+        self.screen_table.verticalHeader().hide()
+        sh = self.screen_table.horizontalHeader()
         sh.setSectionResizeMode(QtWidgets.QHeaderView.ResizeMode.ResizeToContents)
         sh.setStretchLastSection(True)
         self.recommendation = QtWidgets.QLabel("")
@@ -86,7 +86,7 @@ class DiagnosisView(QtWidgets.QWidget):
         left.addWidget(self.recommendation)
         right = QtWidgets.QVBoxLayout()
         right.addWidget(heading("Screen (harmonic-domain force estimate), best first"))
-        right.addWidget(self.screen, 2)
+        right.addWidget(self.screen_table, 2)
         right.addWidget(self.error, 3)
         right.addWidget(self.augment_summary)
         layout = QtWidgets.QHBoxLayout(self)
@@ -155,11 +155,11 @@ class DiagnosisView(QtWidgets.QWidget):
     def _show_screen(self, d) -> None:
         fits = d.screen[:12]
         base = d.baseline.bic if d.baseline is not None else 0.0
-        self.screen.setRowCount(len(fits))
+        self.screen_table.setRowCount(len(fits))
         for r, f in enumerate(fits):
             cells = [f"{f.bic - base:.1f}", f.candidate.label, _parameters(f.values)]
             for k, text in enumerate(cells):
-                self.screen.setItem(r, k, no_edit(QtWidgets.QTableWidgetItem(text)))
+                self.screen_table.setItem(r, k, no_edit(QtWidgets.QTableWidgetItem(text)))
 
     def selected(self):
         """The :class:`~analysis.diagnosis.RankedCandidate` selected (the best by default)."""

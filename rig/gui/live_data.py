@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -116,7 +117,7 @@ class LiveRun:
     n_done_at_start: int = 0
     steps: list[StepPoint] = field(default_factory=list)
     channel_names: tuple[str, ...] = ()
-    current: object = None
+    current: Any = None
     iterations: list[tuple[int, float, str]] = field(default_factory=list)
     last_iterations: list[tuple[int, float, str]] = field(default_factory=list)
     alarms: list[Alarm] = field(default_factory=list)

@@ -95,6 +95,16 @@ class RunBrowser(QtWidgets.QWidget):
         self.plots.addWidget(self.frf)
         self.plots.addWidget(self.random_plots)
 
+        self._lay_out()
+        self.open_button.clicked.connect(self._open_dialog)
+        self.reload_button.clicked.connect(lambda: self.path and self.open(self.path))
+        self.resume_button.clicked.connect(lambda: self.resume_requested.emit(self.path, self.data))
+        self.workbench_button.clicked.connect(lambda: self.workbench_requested.emit(self.path))
+        self.channel.currentIndexChanged.connect(lambda _i: self._draw())
+        self._buttons()
+
+    def _lay_out(self) -> None:
+        """The buttons and the channel on top; the header and the steps beside the plots."""
         top = QtWidgets.QHBoxLayout()
         for b in (self.open_button, self.reload_button, self.resume_button, self.workbench_button):
             top.addWidget(b)
@@ -114,12 +124,6 @@ class RunBrowser(QtWidgets.QWidget):
         layout.setContentsMargins(4, 4, 4, 4)
         layout.addLayout(top)
         layout.addWidget(split, 1)
-        self.open_button.clicked.connect(self._open_dialog)
-        self.reload_button.clicked.connect(lambda: self.path and self.open(self.path))
-        self.resume_button.clicked.connect(lambda: self.resume_requested.emit(self.path, self.data))
-        self.workbench_button.clicked.connect(lambda: self.workbench_requested.emit(self.path))
-        self.channel.currentIndexChanged.connect(lambda _i: self._draw())
-        self._buttons()
 
     def _buttons(self) -> None:
         stepped = isinstance(self.data, SteppedSineData)

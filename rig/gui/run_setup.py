@@ -148,6 +148,16 @@ class BackendBox(QtWidgets.QWidget):
         self.path_error.setWordWrap(True)
         self.path_error.hide()
 
+        self._lay_out(browse)
+        for w in (self.sim, self.ni, self.realtime, self.overwrite, self.pause_on_fault):
+            w.toggled.connect(self._changed)
+        for line in (self.seed, self.device, self.path):
+            line.textChanged.connect(self._changed)
+        self.truth.currentTextChanged.connect(self._changed)
+        self._changed()
+
+    def _lay_out(self, browse: QtWidgets.QPushButton) -> None:
+        """The backend's group above the measurement file's."""
         backend = QtWidgets.QGroupBox("Backend")
         form = QtWidgets.QFormLayout(backend)
         form.addRow(self.sim)
@@ -172,12 +182,6 @@ class BackendBox(QtWidgets.QWidget):
         layout.addWidget(backend)
         layout.addWidget(out)
         layout.addStretch(1)
-        for w in (self.sim, self.ni, self.realtime, self.overwrite, self.pause_on_fault):
-            w.toggled.connect(self._changed)
-        for w in (self.seed, self.device, self.path):
-            w.textChanged.connect(self._changed)
-        self.truth.currentTextChanged.connect(self._changed)
-        self._changed()
 
     def set_remote(self, where: str) -> None:
         """Runs go to ``where``, which owns the rig: its backend and setup apply."""

@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import threading
 from pathlib import Path
+from typing import Any
 
 from PySide6 import QtCore
 
@@ -48,7 +49,7 @@ class ServiceRunController(RunController):
         self.description = f"the acquisition service at {client.url}"
         self.run_id: str | None = None
         self._thread: threading.Thread | None = None
-        self._stream = None
+        self._stream: Any = None
         self._lock = threading.Lock()
 
     @classmethod

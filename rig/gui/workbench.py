@@ -77,7 +77,7 @@ class WorkbenchPanel(QtWidgets.QWidget):
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         self.data: SteppedSineData | None = None
-        self.model = None
+        self.model: Any = None
         self.model_label = ""
         self.linear_run: Path | None = None
         self.comparison = None
@@ -118,6 +118,30 @@ class WorkbenchPanel(QtWidgets.QWidget):
         self.tabs.addTab(self.calibration_view, "Calibration")
         self.tabs.addTab(self.planning_view, "Planning")
 
+        self._lay_out()
+        self._connect()
+        self._calibrated: Any = None
+        self._buttons()
+
+    def _connect(self) -> None:
+        """The buttons to their actions."""
+        self.run_row.button.clicked.connect(lambda: self._ask(self.run_row, self.open_run))
+        self.model_row.button.clicked.connect(lambda: self._ask(self.model_row, self.open_model))
+        self.linear_row.button.clicked.connect(
+            lambda: self._ask(self.linear_row, self.open_linear_run)
+        )
+        self.reference_button.clicked.connect(lambda: self.open_model(None))
+        self.compare_button.clicked.connect(self.compare)
+        self.diagnose_button.clicked.connect(self.diagnose)
+        self.augment_button.clicked.connect(self.augment_selected)
+        self.save_button.clicked.connect(self._save_dialog)
+        self.calibration_view.open_button.clicked.connect(self._open_calibration_dialog)
+        self.calibration_view.use_button.clicked.connect(self.use_calibrated_model)
+        self.planning_view.run_button.clicked.connect(self.run_planning)
+        self.planning_view.open_button.clicked.connect(self._open_plan_dialog)
+
+    def _lay_out(self) -> None:
+        """The inputs and actions on top; the views beside the diagnosis options."""
         inputs = QtWidgets.QVBoxLayout()
         inputs.addWidget(self.run_row)
         inputs.addWidget(self.model_row)
@@ -142,23 +166,6 @@ class WorkbenchPanel(QtWidgets.QWidget):
         layout.setContentsMargins(4, 4, 4, 4)
         layout.addLayout(top)
         layout.addWidget(body, 1)
-
-        self.run_row.button.clicked.connect(lambda: self._ask(self.run_row, self.open_run))
-        self.model_row.button.clicked.connect(lambda: self._ask(self.model_row, self.open_model))
-        self.linear_row.button.clicked.connect(
-            lambda: self._ask(self.linear_row, self.open_linear_run)
-        )
-        self.reference_button.clicked.connect(lambda: self.open_model(None))
-        self.compare_button.clicked.connect(self.compare)
-        self.diagnose_button.clicked.connect(self.diagnose)
-        self.augment_button.clicked.connect(self.augment_selected)
-        self.save_button.clicked.connect(self._save_dialog)
-        self.calibration_view.open_button.clicked.connect(self._open_calibration_dialog)
-        self.calibration_view.use_button.clicked.connect(self.use_calibrated_model)
-        self.planning_view.run_button.clicked.connect(self.run_planning)
-        self.planning_view.open_button.clicked.connect(self._open_plan_dialog)
-        self._calibrated = None
-        self._buttons()
 
     # -- inputs ----------------------------------------------------------------------------
     def _ask(self, row: _FileRow, action) -> None:

@@ -69,6 +69,19 @@ def _array(a: np.ndarray) -> Any:
     return [to_jsonable(v) for v in a.tolist()]
 
 
+def _scalar(obj: np.generic) -> Any:
+    """A NumPy scalar as the Python number (or value) it holds."""
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.complexfloating):
+        return to_jsonable(complex(obj))
+    if isinstance(obj, np.floating):
+        return _number(float(obj))
+    return to_jsonable(obj.item())
+
+
 def to_jsonable(obj: Any) -> Any:
     """Plain JSON data (dicts, lists, str, numbers, bools, None) for ``obj``."""
     if obj is None or isinstance(obj, bool | str):
@@ -82,15 +95,7 @@ def to_jsonable(obj: Any) -> Any:
     if isinstance(obj, np.ndarray):
         return _array(obj)
     if isinstance(obj, np.generic):
-        if isinstance(obj, np.bool_):
-            return bool(obj)
-        if isinstance(obj, np.integer):
-            return int(obj)
-        if isinstance(obj, np.complexfloating):
-            return to_jsonable(complex(obj))
-        if isinstance(obj, np.floating):
-            return _number(float(obj))
-        return to_jsonable(obj.item())
+        return _scalar(obj)
     if isinstance(obj, Fraction):
         return str(obj)
     if isinstance(obj, enum.Enum):

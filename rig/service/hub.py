@@ -19,7 +19,7 @@ import json
 import logging
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 from rig.events import Event, RunPaused, RunResumed, RunStarted, StepFinished
 from rig.service.codec import encode_event, event_line
@@ -41,7 +41,7 @@ class RunLog:
         self.lines: list[bytes] = []
         self.final = False
         self._changed = asyncio.Event()
-        self._fh = None
+        self._fh: BinaryIO | None = None
         if path.exists():
             with open(path, "rb") as fh:
                 self.lines = [line for line in fh if line.endswith(b"\n")]

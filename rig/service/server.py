@@ -189,8 +189,10 @@ async def _guard(request: web.Request, handler) -> web.StreamResponse:
         # bytes that are not UTF-8 arrive as surrogates; a token is ASCII in any case
         logger.warning(
             "refused %s %s from %s: Authorization header not ASCII",
-            request.method, request.path, request.remote,
-        )  # fmt: skip
+            request.method,
+            request.path,
+            request.remote,
+        )
         return _error(
             400,
             "bad-token",

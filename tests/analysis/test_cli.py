@@ -22,6 +22,7 @@ def test_modes_lists_the_beam_modes_in_their_bands():
     assert 141 <= beam[1]["frequency_hz"] <= 160
 
 
+@pytest.mark.slow
 def test_sweep_writes_a_figure_and_converges(tmp_path):
     r = _run("sweep", "--paper", "--levels", "2,8", "--out", str(tmp_path), "--json")
     assert r.returncode == 0, r.stderr

@@ -21,8 +21,13 @@ distributed = pytest.importorskip("distributed")
 
 pytestmark = pytest.mark.slow
 
-LINEAR = {"E_frame": 205e9, "E_corner": 128e9, "E_beam": 201e9, "rho_corner": 5175.0,
-          "k_mount": 57989.0}  # fmt: skip
+LINEAR = {
+    "E_frame": 205e9,
+    "E_corner": 128e9,
+    "E_beam": 201e9,
+    "rho_corner": 5175.0,
+    "k_mount": 57989.0,
+}
 TRUTH = {"k_c": 4.51e5, "gap": 0.60e-3, "v_c": 25.21}
 
 
@@ -43,20 +48,40 @@ def cluster():
 def _tasks_done(cluster) -> int:
     """Tasks the cluster's scheduler has seen finish (over every client)."""
     prefixes = cluster.scheduler.task_prefixes.values()
-    return sum(sum(p.state_counts.get(s, 0) for s in ("memory", "released", "forgotten"))
-               for p in prefixes)  # fmt: skip
+    return sum(
+        sum(p.state_counts.get(s, 0) for s in ("memory", "released", "forgotten")) for p in prefixes
+    )
 
 
 def test_a_reduced_calibration_runs_on_the_cluster(cluster, tmp_path, capsys) -> None:
-    freqs = np.unique(np.round(np.concatenate([[22.0, 24.0], np.arange(25.0, 28.01, 0.5),
-                                               [30.0, 33.0]]), 6))  # fmt: skip
-    run = write_synthetic_run(tmp_path / "run.h5", load_model().with_values({**LINEAR, **TRUTH}),
-                              levels_n=(2.0, 5.0, 8.0), frequencies_hz=freqs, seed=3)  # fmt: skip
+    freqs = np.unique(
+        np.round(np.concatenate([[22.0, 24.0], np.arange(25.0, 28.01, 0.5), [30.0, 33.0]]), 6)
+    )
+    run = write_synthetic_run(
+        tmp_path / "run.h5",
+        load_model().with_values({**LINEAR, **TRUTH}),
+        levels_n=(2.0, 5.0, 8.0),
+        frequencies_hz=freqs,
+        seed=3,
+    )
     sets = [a for k, v in LINEAR.items() for a in ("--set", f"{k}={v}")]
     before = _tasks_done(cluster)
-    code = main(["calibrate", str(run), *sets, "--out", str(tmp_path / "cal"), "--starts", "4",
-                 "--max-iterations", "3", "--scheduler", cluster.scheduler_address,
-                 "--json"])  # fmt: skip
+    code = main(
+        [
+            "calibrate",
+            str(run),
+            *sets,
+            "--out",
+            str(tmp_path / "cal"),
+            "--starts",
+            "4",
+            "--max-iterations",
+            "3",
+            "--scheduler",
+            cluster.scheduler_address,
+            "--json",
+        ]
+    )
     out = capsys.readouterr()
     assert code == 0, out.err
     result = json.loads(out.out.strip().splitlines()[-1])
@@ -67,8 +92,18 @@ def test_a_reduced_calibration_runs_on_the_cluster(cluster, tmp_path, capsys) ->
 
 def test_a_plan_runs_on_the_cluster(cluster, capsys) -> None:
     before = _tasks_done(cluster)
-    code = main(["plan", "--quick", "--no-refine", "--top", "3", "--scheduler",
-                 cluster.scheduler_address, "--json"])  # fmt: skip
+    code = main(
+        [
+            "plan",
+            "--quick",
+            "--no-refine",
+            "--top",
+            "3",
+            "--scheduler",
+            cluster.scheduler_address,
+            "--json",
+        ]
+    )
     out = capsys.readouterr()
     assert code == 0, out.err
     result = json.loads(out.out.strip().splitlines()[-1])

@@ -8,6 +8,8 @@ import sys
 import textwrap
 from concurrent.futures import ProcessPoolExecutor
 
+import pytest
+
 from analysis.logs import summarise_repeats
 
 MHB = logging.getLogger("analysis.mhb.sweep")
@@ -15,8 +17,9 @@ MHB = logging.getLogger("analysis.mhb.sweep")
 
 def _fail_steps(n: int, start: int = 0) -> int:
     for i in range(start, start + n):
-        MHB.warning("MHB step %d (%.4g Hz) did not converge: %s", i, 20 + 0.1 * i,
-                    "line search failed")  # fmt: skip
+        MHB.warning(
+            "MHB step %d (%.4g Hz) did not converge: %s", i, 20 + 0.1 * i, "line search failed"
+        )
     return n
 
 
@@ -70,6 +73,7 @@ def test_forked_workers_count_into_the_stage(caplog) -> None:
     assert [r.getMessage().split(" MHB")[0] for r in caplog.records] == ["calibrate: 100"]
 
 
+@pytest.mark.slow
 def test_the_command_line_prints_one_line_and_every_step_with_debug(tmp_path) -> None:
     script = textwrap.dedent(
         """

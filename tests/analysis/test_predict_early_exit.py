@@ -55,12 +55,15 @@ def _calibrate(model, data, monkeypatch, early_exit: bool):
             m.setattr(FRFObjective, "cost", lambda self, t: cost(self, t, stop_at_failure=False))
         at_lhs = {}
         res = calibrate_nonlinear(
-            model, data, SETTINGS,
+            model,
+            data,
+            SETTINGS,
             progress=lambda stage, info: at_lhs.setdefault(stage, made[0].steps_solved),
-        )  # fmt: skip
+        )
     return res, at_lhs["lhs"]
 
 
+@pytest.mark.slow
 def test_early_exit_keeps_every_start_cost_and_the_calibration(run, monkeypatch):
     model, data = run
     new, steps_new = _calibrate(model, data, monkeypatch, early_exit=True)
@@ -74,6 +77,7 @@ def test_early_exit_keeps_every_start_cost_and_the_calibration(run, monkeypatch)
     assert steps_new < steps_old
 
 
+@pytest.mark.slow
 def test_plain_predictor_stops_at_the_first_failed_fitted_step(run):
     model, data = run
     space = ParameterSpace.from_model(model, SETTINGS.parameters)
@@ -98,9 +102,10 @@ def test_stepping_one_step_at_a_time_is_solve_steps(run):
     pred = SteppedSinePredictor(model, data)
     # a stiff contact: some steps of the highest level fail
     pb = nonlinear.make_predictor(
-        model.with_values({"k_c": 2.5e7, "gap": 0.4e-3, "v_c": 10.0}), data,
+        model.with_values({"k_c": 2.5e7, "gap": 0.4e-3, "v_c": 10.0}),
+        data,
         CalibrationSettings(),
-    ).problem(model.with_values({"k_c": 2.5e7, "gap": 0.4e-3, "v_c": 10.0}))  # fmt: skip
+    ).problem(model.with_values({"k_c": 2.5e7, "gap": 0.4e-3, "v_c": 10.0}))
     sweep = sweeps_of(data)[-1]
     w = 2 * np.pi * data.frequency_hz[sweep][::-1]
     F = (pred._force_sign * pred.drive_force[sweep][:, :, None])[::-1]

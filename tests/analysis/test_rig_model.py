@@ -24,8 +24,13 @@ RIG_POINTS = {
     13: ((0.670, -0.047), "x"),
 }
 LINEAR = ("E_frame", "E_corner", "E_beam", "rho_corner", "k_mount")
-CALIBRATED = {"E_frame": 205e9, "E_corner": 128e9, "E_beam": 201e9, "rho_corner": 5175.0,
-              "k_mount": 57989.0}  # fmt: skip
+CALIBRATED = {
+    "E_frame": 205e9,
+    "E_corner": 128e9,
+    "E_beam": 201e9,
+    "rho_corner": 5175.0,
+    "k_mount": 57989.0,
+}
 
 
 @pytest.fixture(scope="module")
@@ -112,8 +117,16 @@ def test_parameter_derivatives_match_finite_differences(rig, name):
 
 
 def test_parameters_follow_table_2(rig):
-    nominal = {"E_frame": 210e9, "E_corner": 150e9, "E_beam": 210e9, "rho_corner": 4000.0,
-               "k_mount": 1e4, "k_c": 1e6, "gap": 1e-3, "v_c": 10.0}  # fmt: skip
+    nominal = {
+        "E_frame": 210e9,
+        "E_corner": 150e9,
+        "E_beam": 210e9,
+        "rho_corner": 4000.0,
+        "k_mount": 1e4,
+        "k_c": 1e6,
+        "gap": 1e-3,
+        "v_c": 10.0,
+    }
     assert rig.values() == nominal
     assert {n: p.nominal for n, p in rig.parameters.items()} == nominal
     assert set(rig.parameter_names(group="linear")) == set(LINEAR)

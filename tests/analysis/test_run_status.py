@@ -64,8 +64,9 @@ def killed(tmp_path):
         """
     )
     root = Path(__file__).resolve().parents[2]
-    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                       timeout=60, cwd=root)  # fmt: skip
+    r = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, cwd=root
+    )
     assert r.returncode == 0, r.stderr
     return path
 
@@ -101,8 +102,21 @@ def test_compare_of_a_file_with_no_steps_names_it_and_why_the_run_ended(no_steps
 
 
 def test_calibrate_of_a_file_with_no_steps_names_it(no_steps, tmp_path, capsys):
-    assert main(["calibrate", str(no_steps), "--out", str(tmp_path / "cal"), "--workers",
-                 "1", "--starts", "2"]) == 2  # fmt: skip
+    assert (
+        main(
+            [
+                "calibrate",
+                str(no_steps),
+                "--out",
+                str(tmp_path / "cal"),
+                "--workers",
+                "1",
+                "--starts",
+                "2",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert f"error: {no_steps} holds no steps (0 of 28 planned steps recorded)" in err
     assert REASON in err

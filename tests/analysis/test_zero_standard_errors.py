@@ -25,10 +25,10 @@ def zero_std(tmp_path_factory):
         r = records[i]
         std = r.response_std.copy()
         std[0] = std[2] = 0.0  # the drive force (its copy force_std) and the tip
-        records[i] = dataclasses.replace(r, force_std=np.zeros_like(r.force_std),
-                                         response_std=std)  # fmt: skip
-    return write_sample_stepped_sine(tmp_path_factory.mktemp("zero") / "zero_std.h5",
-                                     records=records)  # fmt: skip
+        records[i] = dataclasses.replace(r, force_std=np.zeros_like(r.force_std), response_std=std)
+    return write_sample_stepped_sine(
+        tmp_path_factory.mktemp("zero") / "zero_std.h5", records=records
+    )
 
 
 def test_compare_refuses_and_names_the_file_and_the_channel(zero_std, capsys) -> None:

@@ -174,14 +174,18 @@ def _truth_frfs(data):
     force phasors in the order the steps were measured, with the shaker's static support
     from the file (the analysis' own predictor)."""
     pred = SteppedSinePredictor(
-        load_truth("reference").model, data, channels=("acc3", "acc6", "acc7"),
-        n_harmonics=15, n_time=512,
-    )  # fmt: skip
+        load_truth("reference").model,
+        data,
+        channels=("acc3", "acc6", "acc7"),
+        n_harmonics=15,
+        n_time=512,
+    )
     p = pred.predict()
     assert np.all(p.converged)
     return p.frf
 
 
+@pytest.mark.slow
 def test_frfs_agree_with_the_truths_mhb(tmp_path):
     """Acceptance: H^nu measured on the simulated rig against the truth's multi-harmonic
     balance driven by the measured force phasors, within the measurement's standard errors

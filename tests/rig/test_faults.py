@@ -113,8 +113,10 @@ def test_disconnected_sensor_is_named_by_the_pretest(tmp_path):
 def _sensitive_tip(setup, mv_per_g: float):
     """``setup`` with the tip's accelerometer ``mv_per_g`` sensitive (its +-5 V input range
     then holds +-5000 / mv_per_g g)."""
-    chans = tuple(dataclasses.replace(c, sensitivity=mv_per_g) if c.name == "acc7" else c
-                  for c in setup.channels)  # fmt: skip
+    chans = tuple(
+        dataclasses.replace(c, sensitivity=mv_per_g) if c.name == "acc7" else c
+        for c in setup.channels
+    )
     return dataclasses.replace(setup, channels=chans)
 
 

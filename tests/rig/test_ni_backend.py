@@ -204,13 +204,8 @@ def test_backend_not_satisfying_the_protocol_is_refused(monkeypatch):
 # ---------------------------------------------------------------- configuration
 
 
-def test_configure_creates_the_documented_tasks():
-    backend, device = make()
-    config = standard_config()
-    rate = backend.configure(config)
-    assert rate == 100e6 / round(100e6 / RATE) != RATE  # the realised rate, read back
-    assert backend.sample_rate_hz == rate
-
+def _check_output_task(device) -> None:
+    """The drive zeroed on demand, then its continuous, regenerating, triggered task."""
     zero = args_of(device, "write", "ao-on-demand")
     assert zero and zero[0]["data"] == 0.0 and zero[0]["auto_start"] is True
     assert device.tasks[0].closed, "the on-demand task that zeroes the drive is closed"
@@ -228,6 +223,9 @@ def test_configure_creates_the_documented_tasks():
     assert idle["value"] is AOIdleOutputBehavior.ZERO_VOLTS
     assert args_of(device, "control", "ao") == [{"action": TaskMode.TASK_VERIFY}]
 
+
+def _check_input_channels(device, config) -> None:
+    """IEPE force and accelerations in their units with internal excitation, AC coupled."""
     (force,) = args_of(device, "ai_channels.add_ai_force_iepe_chan")
     assert force["physical_channel"] == "Dev1/ai0" and force["name_to_assign_to_channel"] == "force"
     assert force["units"] is ForceUnits.NEWTONS
@@ -256,12 +254,27 @@ def test_configure_creates_the_documented_tasks():
     assert ai_timing["sample_mode"] is AcquisitionType.CONTINUOUS
     assert ai_timing["samps_per_chan"] == math.ceil(config.buffer_s * RATE)
 
+
+def _check_watchdog(device, config) -> None:
+    """A watchdog that zeroes the drive when it expires."""
     (watchdog,) = args_of(device, "WatchdogTask")
     assert watchdog["device_name"] == "Dev1" and watchdog["timeout"] == config.watchdog_s
     (states,) = args_of(device, "cfg_watchdog_ao_expir_states")
     (state,) = states["expiration_states"]
     assert state.physical_channel == "Dev1/ao0" and state.expiration_state == 0.0
     assert state.output_type is WatchdogAOExpirState.VOLTAGE
+
+
+def test_configure_creates_the_documented_tasks():
+    backend, device = make()
+    config = standard_config()
+    rate = backend.configure(config)
+    assert rate == 100e6 / round(100e6 / RATE) != RATE  # the realised rate, read back
+    assert backend.sample_rate_hz == rate
+
+    _check_output_task(device)
+    _check_input_channels(device, config)
+    _check_watchdog(device, config)
     assert backend.watchdog_armed
     backend.close()
 

@@ -63,6 +63,7 @@ def test_plans_lists_the_builtin_plans():
     assert "224 steps" in plans["paper"]["summary"] and plans["linear"]["kind"] == "random"
 
 
+@pytest.mark.slow
 def test_ni_backend_without_driver_points_to_sim(files, tmp_path):
     r = _rig("run", "quick", "--backend", "ni", "--out", tmp_path / "x.h5", "--lock-dir", tmp_path)
     if r.returncode == 0:  # pragma: no cover - a machine with NI-DAQmx and hardware
@@ -76,14 +77,26 @@ def test_ni_backend_without_driver_points_to_sim(files, tmp_path):
 def _start(files, out, *extra):
     return subprocess.Popen(
         [
-            sys.executable, "-m", "rig", "run", files / "steps.toml", "--backend", "sim",
-            "--setup", files / "setup.toml", "--out", out, "--lock-dir", files, *map(str, extra),
+            sys.executable,
+            "-m",
+            "rig",
+            "run",
+            files / "steps.toml",
+            "--backend",
+            "sim",
+            "--setup",
+            files / "setup.toml",
+            "--out",
+            out,
+            "--lock-dir",
+            files,
+            *map(str, extra),
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         env=ENV,
-    )  # fmt: skip
+    )
 
 
 def _wait_for_step(proc, n, deadline_s=60.0):
@@ -101,6 +114,7 @@ def _wait_for_step(proc, n, deadline_s=60.0):
     raise AssertionError(f"step {n} never reported: {''.join(lines)}")
 
 
+@pytest.mark.slow
 def test_sigkill_mid_run_leaves_a_file_that_resume_completes(files, tmp_path):
     out = tmp_path / "killed.h5"
     proc = _start(files, out)
@@ -121,6 +135,7 @@ def test_sigkill_mid_run_leaves_a_file_that_resume_completes(files, tmp_path):
     assert done.complete and sorted(done.plan_index) == list(range(22))
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_cleanly(files, tmp_path):
     out = tmp_path / "interrupted.h5"
     proc = _start(files, out)
@@ -134,20 +149,40 @@ def test_ctrl_c_stops_cleanly(files, tmp_path):
     assert "resume    python -m rig run --resume" in stdout
 
 
+@pytest.mark.slow
 def test_run_linear_and_export(files, tmp_path):
     out = tmp_path / "run.h5"
     r = _rig(
-        "run", files / "steps.toml", "--backend", "sim", "--setup", files / "setup.toml",
-        "--out", out, "--lock-dir", files, "--seed", "3",
-    )  # fmt: skip
+        "run",
+        files / "steps.toml",
+        "--backend",
+        "sim",
+        "--setup",
+        files / "setup.toml",
+        "--out",
+        out,
+        "--lock-dir",
+        files,
+        "--seed",
+        "3",
+    )
     assert r.returncode == 0, r.stderr
     assert "steps     22 of 22 on disk" in r.stdout and "converged" in r.stdout
     assert re.search(r"step 22/22 \[#+\]", r.stderr)
     lin = tmp_path / "lin.h5"
     r = _rig(
-        "linear", files / "random.toml", "--backend", "sim", "--setup", files / "setup.toml",
-        "--out", lin, "--lock-dir", files, "--json",
-    )  # fmt: skip
+        "linear",
+        files / "random.toml",
+        "--backend",
+        "sim",
+        "--setup",
+        files / "setup.toml",
+        "--out",
+        lin,
+        "--lock-dir",
+        files,
+        "--json",
+    )
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout.strip().splitlines()[-1])["status"] == "success"
     data = read_measurement(lin)
@@ -173,6 +208,7 @@ def test_top_level_help_lists_each_command_once():
     assert "{" not in text  # no {a,b,...} list of every command in the usage
 
 
+@pytest.mark.slow
 def test_an_existing_output_file_names_the_command_line_flag(tmp_path):
     """The library says overwrite=True; a command-line user reads --overwrite."""
     for command in ("run", "linear"):
@@ -201,12 +237,24 @@ def test_the_library_keeps_its_own_wording_and_the_cli_rephrases_each_kind(tmp_p
         assert msg == f"{out}: file exists (pass --overwrite to replace it)"
 
 
+@pytest.mark.slow
 def test_a_simulated_fault_switched_on_from_the_command_line(files, tmp_path):
     out = tmp_path / "fault.h5"
     r = _rig(
-        "run", files / "steps.toml", "--setup", files / "setup.toml", "--out", out,
-        "--backend", "sim", "--lock-dir", files, "--json", "--fault", "acc7:disconnect@step3",
-    )  # fmt: skip
+        "run",
+        files / "steps.toml",
+        "--setup",
+        files / "setup.toml",
+        "--out",
+        out,
+        "--backend",
+        "sim",
+        "--lock-dir",
+        files,
+        "--json",
+        "--fault",
+        "acc7:disconnect@step3",
+    )
     assert r.returncode != 0
     summary = json.loads(r.stdout.strip().splitlines()[-1])
     assert summary["status"] == "aborted" and summary["n_done"] == 2, summary
@@ -229,11 +277,22 @@ def test_a_simulated_fault_switched_on_from_the_command_line(files, tmp_path):
         ("acc7:read-timeout", "concerns the whole rig"),
     ],
 )
+@pytest.mark.slow
 def test_a_bad_fault_is_refused_with_the_syntax(files, tmp_path, spec, expected):
     r = _rig(
-        "run", files / "steps.toml", "--setup", files / "setup.toml", "--out",
-        tmp_path / "x.h5", "--backend", "sim", "--lock-dir", files, "--fault", spec,
-    )  # fmt: skip
+        "run",
+        files / "steps.toml",
+        "--setup",
+        files / "setup.toml",
+        "--out",
+        tmp_path / "x.h5",
+        "--backend",
+        "sim",
+        "--lock-dir",
+        files,
+        "--fault",
+        spec,
+    )
     assert r.returncode == 2, r.stderr
     assert expected in r.stderr and f"--fault {spec!r}" in r.stderr
     assert "Traceback" not in r.stderr

@@ -89,9 +89,13 @@ def test_setup_level_rules(reference):
     drive = reference.drive_force_channel
     with pytest.raises(ValueError, match="drive at point 5"):
         LabSetup(
-            "x", "", reference.daq, dataclasses.replace(reference.drive, point=5),
-            reference.amplifier, reference.channels,
-        )  # fmt: skip
+            "x",
+            "",
+            reference.daq,
+            dataclasses.replace(reference.drive, point=5),
+            reference.amplifier,
+            reference.channels,
+        )
     with pytest.raises(ValueError, match="ChannelSetup 'f'.direction"):
         ChannelSetup("f", "Dev1/ai0", "force", 3, "q", 1.0, "mV/N")
     assert drive.role == "drive-force"

@@ -11,6 +11,10 @@ TRUTH_GAP_M = 0.60e-3  # the reference truth's gap
 TRUTH_KC = 4.51e5
 
 
+# every test shares the whole workflow run (several minutes)
+pytestmark = pytest.mark.slow
+
+
 @pytest.fixture(scope="module")
 def workflow(tmp_path_factory):
     d = tmp_path_factory.mktemp("workflow")
@@ -20,26 +24,48 @@ def workflow(tmp_path_factory):
     plan = d / "random.toml"
     plan.write_text(text.replace("average_records = 64", "average_records = 40"))
     out = d / "out"
-    summary = run_workflow(out, plan="quick", linear_plan=str(plan), starts=6, quiet=True,
-                           lock_dir=d / "locks")  # fmt: skip
+    summary = run_workflow(
+        out, plan="quick", linear_plan=str(plan), starts=6, quiet=True, lock_dir=d / "locks"
+    )
     return out, summary
 
 
 def test_every_stage_writes_its_files(workflow):
     out, summary = workflow
-    for name in ("truth.json", "linear.h5", "paper.h5", "linear/calibrated_model.toml",
-                 "planning.json",
-                 "nonlinear/calibration.json", "nonlinear/crossval.json",
-                 "nonlinear/validation.json", "nonlinear/report.html", "summary.md",
-                 "workflow.json"):  # fmt: skip
+    for name in (
+        "truth.json",
+        "linear.h5",
+        "paper.h5",
+        "linear/calibrated_model.toml",
+        "planning.json",
+        "nonlinear/calibration.json",
+        "nonlinear/crossval.json",
+        "nonlinear/validation.json",
+        "nonlinear/report.html",
+        "summary.md",
+        "workflow.json",
+    ):
         assert (out / name).is_file(), name
     stages = [s["stage"] for s in json.loads((out / "workflow.json").read_text())["stages"]]
-    assert stages == ["reference values", "random test", "linear calibration",
-                      "pretest planning", "stepped-sine run", "nonlinear calibration",
-                      "validation", "report"]  # fmt: skip
+    assert stages == [
+        "reference values",
+        "random test",
+        "linear calibration",
+        "pretest planning",
+        "stepped-sine run",
+        "nonlinear calibration",
+        "validation",
+        "report",
+    ]
     md = (out / "summary.md").read_text()
-    headings = ("Verdict", "Linear calibration (Table 2)", "Pretest planning (Table 4)",
-                "Nonlinear calibration (Table 5)", "Cross-validation", "Validation")  # fmt: skip
+    headings = (
+        "Verdict",
+        "Linear calibration (Table 2)",
+        "Pretest planning (Table 4)",
+        "Nonlinear calibration (Table 5)",
+        "Cross-validation",
+        "Validation",
+    )
     for heading in headings:
         assert f"## {heading}" in md
 

@@ -90,7 +90,7 @@ def run_stepped_sine(
             steps.append(
                 StepRecord(
                     level, fs / n, drive, est.phasors, est.std, record.iterations, record.converged
-                )  # fmt: skip
+                )
             )
     simulated = daq.simulated_time_s
     daq.stop()

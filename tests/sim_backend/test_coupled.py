@@ -57,8 +57,9 @@ def test_coupled_blocks_equal_a_direct_solve_of_the_assembled_coupled_system() -
         rhs[n + 1, 1] = 1.0  # unit voltage
         sol = np.linalg.solve(Z, rhs)
         force = kst * (sol[n] - sol[d])
-        expected = np.vstack([sol[asm.point_dof(7)], sol[asm.point_dof(6)], sol[d], force,
-                              sol[n + 1]])  # fmt: skip
+        expected = np.vstack(
+            [sol[asm.point_dof(7)], sol[asm.point_dof(6)], sol[d], force, sol[n + 1]]
+        )
         np.testing.assert_allclose(H[i], expected, rtol=1e-5)
 
 
@@ -69,9 +70,12 @@ def test_state_space_transfer_equals_the_coupled_receptance(rig: RigModel) -> No
     block = rig.coupled.block(rig.output_dofs, [rig.coupled.voltage])(omega)[:, :, 0]
     block = block * rig.amplifier_response(omega)[:, None]
     rows = np.vstack(
-        [sp.displacement_rows(rig.structural_outputs), sp.force_row(rig.drive_dof),
-         sp.current_row()]
-    )  # fmt: skip
+        [
+            sp.displacement_rows(rig.structural_outputs),
+            sp.force_row(rig.drive_dof),
+            sp.current_row(),
+        ]
+    )
     for i, w in enumerate(omega):
         via_modes = rows @ sp.W @ (sp.g / (1j * w - sp.lam))
         np.testing.assert_allclose(via_modes, block[i], rtol=1e-4)

@@ -167,6 +167,7 @@ def test_write_index_is_a_whole_period_after_a_rounded_fade() -> None:
     daq.close()
 
 
+@pytest.mark.slow
 def test_random_drive_gives_an_h1_with_the_truths_first_beam_mode() -> None:
     from rig.estimation.frf import h1_frf
     from rig.signals.random import band_limited_random

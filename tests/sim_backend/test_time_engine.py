@@ -34,8 +34,16 @@ def test_stepper_matches_a_direct_integration_through_contact() -> None:
         f = np.array([el.force(ue[i : i + 1], ve[i : i + 1])[0] for i, el in enumerate(elements)])
         return sp.A @ s + sp.b * uu + sp.Bn @ (L.T @ f)
 
-    ref = solve_ivp(rhs, (0, T), np.zeros(sp.size), method="Radau", t_eval=t[1:], rtol=1e-7,
-                    atol=1e-12, jac=sp.A)  # fmt: skip
+    ref = solve_ivp(
+        rhs,
+        (0, T),
+        np.zeros(sp.size),
+        method="Radau",
+        t_eval=t[1:],
+        rtol=1e-7,
+        atol=1e-12,
+        jac=sp.A,
+    )
     assert ref.success
     tip = L @ Tn
     x_ref = (tip @ ref.y)[0]

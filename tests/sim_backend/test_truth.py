@@ -27,9 +27,15 @@ def test_reference_truth_holds_the_calibrated_values_and_the_analyst_nominals() 
     truth = load_truth("reference")
     values = truth.model.values()
     expected = {
-        "E_frame": 205e9, "E_corner": 128e9, "E_beam": 201e9, "rho_corner": 5175.0,
-        "k_mount": 57989.0, "k_c": 4.51e5, "gap": 0.60e-3, "v_c": 25.21,
-    }  # fmt: skip
+        "E_frame": 205e9,
+        "E_corner": 128e9,
+        "E_beam": 201e9,
+        "rho_corner": 5175.0,
+        "k_mount": 57989.0,
+        "k_c": 4.51e5,
+        "gap": 0.60e-3,
+        "v_c": 25.21,
+    }
     for name, value in expected.items():
         assert values[name] == pytest.approx(value, rel=1e-12), name
     analyst = load_model()

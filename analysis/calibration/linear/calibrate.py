@@ -265,15 +265,143 @@ def calibrate_linear(
     def objective(
         channels: list[int], eq, base: Model = model_s, sub: ParameterSpace = space
     ) -> EqualizedFRFObjective:
-        return EqualizedFRFObjective(base, sub, [rows[i] for i in channels], col,
-                                     eq.frequency_hz, eq.H[:, channels], eq.zeta0, f_max,
-                                     st.use_phase)  # fmt: skip
+        return EqualizedFRFObjective(
+            base,
+            sub,
+            [rows[i] for i in channels],
+            col,
+            eq.frequency_hz,
+            eq.H[:, channels],
+            eq.zeta0,
+            f_max,
+            st.use_phase,
+        )
 
     every = objective(list(range(len(rows))), eq)
     cal, val = split_channels(run_frfs, st.calibration_points, every, x0, st.n_calibration)
     zetas = [z for z in st.zeta0_schedule if z > zeta0] + [zeta0]
     clusters = _mode_clusters(fit.n_modes, st.n_per_band, len(cal), st.use_phase)
     nominal = {n: model.parameters[n].nominal for n in names}
+    hf = _fit_determined(
+        model,
+        model_s,
+        names,
+        nominal,
+        objective,
+        cal,
+        eq,
+        fit,
+        zetas,
+        zeta0,
+        clusters,
+        st,
+        run_frfs.source,
+    )
+    sol, precision, cov_f, estimator = _under_priors(
+        model, hf, objective, cal, eq, nominal, zeta0, st
+    )
+    stages, held, fitted, sub, cov_d = hf.stages, hf.held, hf.fitted, hf.sub, hf.cov_d
+    t_fit = time.perf_counter()
+
+    values = {**sub.as_dict(sub.to_physical(sol.x)), **{n: nominal[n] for n in held}}
+    values = {n: values[n] for n in names}
+    x_all = space.to_theta([values[n] for n in names])
+    jac_all = objective(cal, eq)(x_all, True)[1] if held else None
+    cov = _with_held(space, x_all, fitted, cov_f, held, jac_all, model, cov_d, precision)
+    status = {n: held[n]["status"] if n in held else "fitted" for n in names}
+    reasons = {n: held[n]["reason"] for n in held}
+    model_cal = model_s.with_values(values)
+    asm_cal = model_cal.assemble()
+    modes_cal = modal_analysis(asm_cal.M, asm_cal.K)
+    pairs = _pair_modes(modes_cal, fit, rows, band, st.mac_min)
+    unidentified = _unidentified_modes(model_cal, asm_cal, modes_cal, names, pairs, band)
+    damping, out_model, zeta_std = _identified_damping(
+        model, model_cal, values, fit, pairs, masses, st
+    )
+
+    def deviations(x: np.ndarray, m_: Model) -> dict[str, Any]:
+        return _deviations(every, x, m_, run_frfs.channels, f, H, f_max, cal, val)
+
+    validation = {
+        "before": deviations(x0, model_s),
+        "after": deviations(x_all, model_cal.with_damping(damping)),
+    }
+    t_end = time.perf_counter()
+    log.info("linear calibration: %s, %d iterations, cost %.4g", sol.message, sol.nit, sol.cost)
+    return LinearCalibration(
+        x=x_all,
+        cost=float(sol.cost),
+        jac=sol.jac,
+        cov=cov,
+        nfev=sum(g["nfev"] for g in stages),
+        njev=sum(g["njev"] for g in stages),
+        nit=sum(g["nit"] for g in stages),
+        success=sol.success,
+        message=sol.message,
+        names=tuple(names),
+        stages=stages,
+        status=status,
+        status_reason=reasons,
+        prior_rel_std={n: model.parameters[n].prior_rel_std for n in names},
+        damping_rel_std=zeta_std,
+        covariance_estimator=estimator,
+        parameters=values,
+        start=space.as_dict(p0),
+        zeta0=zeta0,
+        metric_frequency_hz=eq.frequency_hz,
+        calibration_channels=tuple(run_frfs.channels[i] for i in cal),
+        validation_channels=tuple(run_frfs.channels[i] for i in val),
+        calibration_points=tuple(sorted({run_frfs.points[i] for i in cal})),
+        validation_points=tuple(sorted({run_frfs.points[i] for i in val})),
+        fit=fit,
+        modes=pairs,
+        validation=validation,
+        model=out_model,
+        settings={**st.to_json(), "zeta0_used": zeta0, "sensor_masses_kg": masses},
+        source=run_frfs.source,
+        timings={
+            "identification_s": t_id - t0,
+            "calibration_s": t_fit - t_id,
+            "validation_s": t_end - t_fit,
+            "total_s": t_end - t0,
+        },
+        unidentified_modes=unidentified,
+    )
+
+
+@dataclass
+class _HeldFit:
+    """The fit of the parameters the test determines, the others held at their nominal values
+    (``held``: name -> status and reason)."""
+
+    sol: LeastSquaresResult
+    stages: list[dict]
+    cov_d: np.ndarray
+    estimator: str
+    held: dict[str, dict[str, Any]]
+    fitted: list[str]
+    sub: ParameterSpace
+    base: Model
+    bounds: tuple[np.ndarray, np.ndarray]
+
+
+def _fit_determined(
+    model: Model,
+    model_s: Model,
+    names,
+    nominal,
+    objective,
+    cal,
+    eq,
+    fit,
+    zetas,
+    zeta0,
+    clusters,
+    st,
+    source: str,
+) -> _HeldFit:
+    """Fit, hold the first parameter the test determines worse than its prior at its nominal
+    value, and fit again, until the test determines every one still fitted."""
     held: dict[str, dict[str, Any]] = {}
     while True:
         fitted = [n for n in names if n not in held]
@@ -292,48 +420,54 @@ def calibrate_linear(
         cov_d, estimator = data_covariance(sol.jac, sol.fun, clusters)
         new = {} if st.weak_parameters == "fit" else _first(decide_weak(model, sub, sol.x, cov_d))
         if not new:
-            break
+            return _HeldFit(sol, stages, cov_d, estimator, held, fitted, sub, base, (lo_f, hi_f))
         held.update(new)
         if len(held) == len(names):
             raise CalibrationError(
-                f"{run_frfs.source}: the test determines none of {names}: "
+                f"{source}: the test determines none of {names}: "
                 + "; ".join(f"{n}: {h['reason']}" for n, h in held.items())
             )
-    precision = _prior_precision(model, fitted) if st.weak_parameters == "hold" else None
-    if precision is not None and precision.any():
-        # the fitted ones under their priors (MAP): the data's weight is the one its
-        # covariance estimator gives it, so the prior counts exactly as much as it should
-        data_weight = _data_weight(sol, cov_d)
-        target = sub.to_theta([nominal[n] for n in fitted])
-        sol = METHODS[st.method](
-            _WithPrior(objective(cal, eq, base, sub), target, precision, data_weight),
-            sol.x,
-            (lo_f, hi_f),
-            st.max_iterations,
-        )
-        sol.fun = sol.fun[: -len(fitted)]
-        sol.jac = sol.jac[: -len(fitted)]
-        stages.append({"zeta0": zeta0, "prior": True, "cost": float(sol.cost), "nit": int(sol.nit),
-                       "nfev": int(sol.nfev), "njev": int(sol.njev),
-                       "success": bool(sol.success), "message": sol.message})  # fmt: skip
-        cov_f = np.linalg.inv(np.linalg.inv(cov_d) + np.diag(precision))
-        estimator += "; combined with the model file's priors (MAP)"
-    else:
-        precision, cov_f = np.zeros(len(fitted)), cov_d
-    t_fit = time.perf_counter()
 
-    values = {**sub.as_dict(sub.to_physical(sol.x)), **{n: nominal[n] for n in held}}
-    values = {n: values[n] for n in names}
-    x_all = space.to_theta([values[n] for n in names])
-    jac_all = objective(cal, eq)(x_all, True)[1] if held else None
-    cov = _with_held(space, x_all, fitted, cov_f, held, jac_all, model, cov_d, precision)
-    status = {n: held[n]["status"] if n in held else "fitted" for n in names}
-    reasons = {n: held[n]["reason"] for n in held}
-    model_cal = model_s.with_values(values)
-    asm_cal = model_cal.assemble()
-    modes_cal = modal_analysis(asm_cal.M, asm_cal.K)
-    pairs = _pair_modes(modes_cal, fit, rows, band, st.mac_min)
-    unidentified = _unidentified_modes(model_cal, asm_cal, modes_cal, names, pairs, band)
+
+def _under_priors(model: Model, hf: _HeldFit, objective, cal, eq, nominal, zeta0, st):
+    """The fitted parameters under their priors (maximum a posteriori) where the model file
+    gives them; returns the solution, the prior precision, the covariance and its
+    estimator's description."""
+    fitted, sub, sol = hf.fitted, hf.sub, hf.sol
+    precision = _prior_precision(model, fitted) if st.weak_parameters == "hold" else None
+    if precision is None or not precision.any():
+        return sol, np.zeros(len(fitted)), hf.cov_d, hf.estimator
+    # the data's weight is the one its covariance estimator gives it, so the prior counts
+    # exactly as much as it should
+    data_weight = _data_weight(sol, hf.cov_d)
+    target = sub.to_theta([nominal[n] for n in fitted])
+    sol = METHODS[st.method](
+        _WithPrior(objective(cal, eq, hf.base, sub), target, precision, data_weight),
+        sol.x,
+        hf.bounds,
+        st.max_iterations,
+    )
+    sol.fun = sol.fun[: -len(fitted)]
+    sol.jac = sol.jac[: -len(fitted)]
+    hf.stages.append(
+        {
+            "zeta0": zeta0,
+            "prior": True,
+            "cost": float(sol.cost),
+            "nit": int(sol.nit),
+            "nfev": int(sol.nfev),
+            "njev": int(sol.njev),
+            "success": bool(sol.success),
+            "message": sol.message,
+        }
+    )
+    cov_f = np.linalg.inv(np.linalg.inv(hf.cov_d) + np.diag(precision))
+    return sol, precision, cov_f, hf.estimator + "; combined with the model file's priors (MAP)"
+
+
+def _identified_damping(model: Model, model_cal: Model, values, fit, pairs, masses, st):
+    """The identified per-mode damping, the calibrated model with it (without the sensors'
+    masses unless kept) and the damping ratios' standard deviations by that model's modes."""
     damping = DampingSpec(
         default_zeta=model.damping.default_zeta,
         per_mode={pr.model_mode: pr.zeta for pr in pairs if pr.model_mode is not None},
@@ -348,37 +482,7 @@ def calibrate_linear(
     else:
         out_model, numbers = _without_sensors(model.with_values(values), model_cal, damping)
         zeta_std = {numbers[k]: v for k, v in zeta_std.items()}
-
-    def deviations(x: np.ndarray, m_: Model) -> dict[str, Any]:
-        return _deviations(every, x, m_, run_frfs.channels, f, H, f_max, cal, val)
-
-    validation = {
-        "before": deviations(x0, model_s),
-        "after": deviations(x_all, model_cal.with_damping(damping)),
-    }
-    t_end = time.perf_counter()
-    log.info("linear calibration: %s, %d iterations, cost %.4g", sol.message, sol.nit, sol.cost)
-    return LinearCalibration(
-        x=x_all, cost=float(sol.cost), jac=sol.jac, cov=cov,
-        nfev=sum(g["nfev"] for g in stages), njev=sum(g["njev"] for g in stages),
-        nit=sum(g["nit"] for g in stages), success=sol.success, message=sol.message,
-        names=tuple(names), stages=stages, status=status, status_reason=reasons,
-        prior_rel_std={n: model.parameters[n].prior_rel_std for n in names},
-        damping_rel_std=zeta_std,
-        covariance_estimator=estimator,
-        parameters=values, start=space.as_dict(p0), zeta0=zeta0,
-        metric_frequency_hz=eq.frequency_hz,
-        calibration_channels=tuple(run_frfs.channels[i] for i in cal),
-        validation_channels=tuple(run_frfs.channels[i] for i in val),
-        calibration_points=tuple(sorted({run_frfs.points[i] for i in cal})),
-        validation_points=tuple(sorted({run_frfs.points[i] for i in val})),
-        fit=fit, modes=pairs, validation=validation, model=out_model,
-        settings={**st.to_json(), "zeta0_used": zeta0, "sensor_masses_kg": masses},
-        source=run_frfs.source,
-        timings={"identification_s": t_id - t0, "calibration_s": t_fit - t_id,
-                 "validation_s": t_end - t_fit, "total_s": t_end - t0},
-        unidentified_modes=unidentified,
-    )  # fmt: skip
+    return damping, out_model, zeta_std
 
 
 # -- what the test determines -----------------------------------------------------------------
@@ -386,8 +490,8 @@ def _mode_clusters(n_modes: int, n_per_band: int, n_channels: int, use_phase: bo
     """The (identified mode, channel) each calibration residual belongs to (residuals are
     ordered ``(metric frequency, channel)``, the metric frequencies mode by mode, then the
     phases, which share their magnitude's cluster)."""
-    per = np.arange(n_modes * n_channels).reshape(n_modes, 1, n_channels)
-    per = np.repeat(per, n_per_band, axis=1).ravel()
+    by_mode = np.arange(n_modes * n_channels).reshape(n_modes, 1, n_channels)
+    per = np.repeat(by_mode, n_per_band, axis=1).ravel()
     return np.concatenate([per, per]) if use_phase else per
 
 
@@ -465,9 +569,13 @@ def decide_weak(model: Model, space: ParameterSpace, x: np.ndarray, cov: np.ndar
                 "reason": f"{why}: {held_at} with the prior's +-{100 * prior:.3g} %",
             }
         else:
-            out[name] = {"status": "at_bound", "reason": (
-                f"{why}: {held_at}; no prior is known (give prior_rel_std in the model file), "
-                "so its uncertainty is not known")}  # fmt: skip
+            out[name] = {
+                "status": "at_bound",
+                "reason": (
+                    f"{why}: {held_at}; no prior is known (give prior_rel_std in the model file), "
+                    "so its uncertainty is not known"
+                ),
+            }
         # a bound first, then the least informed: the others are fitted again with it held
         out[name]["priority"] = (bool(side), float(1.0 - share[i]))
     return out
@@ -485,8 +593,14 @@ def _first(weak: dict) -> dict:
 
 def _prior_precision(model: Model, names) -> np.ndarray:
     """``1 / prior_rel_std^2`` per parameter in scaled coordinates (0: no prior)."""
-    return np.array([0.0 if model.parameters[n].prior_rel_std is None
-                     else model.parameters[n].prior_rel_std ** -2 for n in names])  # fmt: skip
+    return np.array(
+        [
+            0.0
+            if model.parameters[n].prior_rel_std is None
+            else model.parameters[n].prior_rel_std ** -2
+            for n in names
+        ]
+    )
 
 
 def _data_weight(sol, cov_d: np.ndarray) -> float:
@@ -568,9 +682,17 @@ def _continuation(make_objective, zetas, x0, bounds, st):
     for z in zetas:
         sol = METHODS[st.method](make_objective(z), x, bounds, st.max_iterations)
         x = sol.x
-        stages.append({"zeta0": z, "cost": float(sol.cost), "nit": int(sol.nit),
-                       "nfev": int(sol.nfev), "njev": int(sol.njev),
-                       "success": bool(sol.success), "message": sol.message})  # fmt: skip
+        stages.append(
+            {
+                "zeta0": z,
+                "cost": float(sol.cost),
+                "nit": int(sol.nit),
+                "nfev": int(sol.nfev),
+                "njev": int(sol.njev),
+                "success": bool(sol.success),
+                "message": sol.message,
+            }
+        )
         log.info("zeta0 = %.4g: cost %.4g after %d iterations", z, sol.cost, sol.nit)
     return sol, stages
 
@@ -615,19 +737,25 @@ def _unidentified_modes(model: Model, asm, modes, names, pairs, band) -> list[di
     """The model's modes in ``band`` without a paired test mode, with ``d ln f / d ln p``
     (``asm`` and ``modes``: the model's assembly and modal analysis)."""
     paired = {pr.model_mode - 1 for pr in pairs if pr.model_mode is not None}  # 1-based
-    idx = [i for i, f in enumerate(modes.frequency_hz)
-           if band[0] <= f <= band[1] and i not in paired]  # fmt: skip
+    idx = [
+        i for i, f in enumerate(modes.frequency_hz) if band[0] <= f <= band[1] and i not in paired
+    ]
     if not idx:
         return []
-    dlam, _ = mode_sensitivities(asm.M, asm.K, modes, {n: asm.dM[n] for n in names},
-                                 {n: asm.dK[n] for n in names})  # fmt: skip
+    dlam, _ = mode_sensitivities(
+        asm.M, asm.K, modes, {n: asm.dM[n] for n in names}, {n: asm.dK[n] for n in names}
+    )
     lam = modes.omega**2
     return [
-        {"model_mode": int(i) + 1, "frequency_hz": float(modes.frequency_hz[i]),
-         "sensitivity": {n: float(0.5 * dlam[n][i] / lam[i] * model.parameters[n].value)
-                         for n in names}}
+        {
+            "model_mode": int(i) + 1,
+            "frequency_hz": float(modes.frequency_hz[i]),
+            "sensitivity": {
+                n: float(0.5 * dlam[n][i] / lam[i] * model.parameters[n].value) for n in names
+            },
+        }
         for i in idx
-    ]  # fmt: skip
+    ]
 
 
 def _without_sensors(bare: Model, loaded: Model, damping: DampingSpec):

@@ -127,16 +127,18 @@ class LinearCalibration:
 
     def held(self) -> dict[str, str]:
         """Parameters not fitted (held at their nominal value): name -> why."""
-        return {n: self.status_reason.get(n, "") for n in self.names
-                if self.status.get(n, "fitted") != "fitted"}  # fmt: skip
+        return {
+            n: self.status_reason.get(n, "")
+            for n in self.names
+            if self.status.get(n, "fitted") != "fitted"
+        }
 
     def undetermined(self, max_relative_std: float = 0.05) -> dict[str, float]:
         """Parameters the test leaves uncertain: name -> relative standard deviation, for the
         held ones and the fitted ones above ``max_relative_std`` (default 5 %), largest
         first (NaN: a held parameter with no known prior)."""
         rel = {n: self.std[n] / abs(self.parameters[n]) for n in self.names if self.parameters[n]}
-        bad = {n: r for n, r in rel.items()
-               if n in self.held() or not r <= max_relative_std}  # fmt: skip
+        bad = {n: r for n, r in rel.items() if n in self.held() or not r <= max_relative_std}
         return dict(sorted(bad.items(), key=lambda kv: -kv[1] if np.isfinite(kv[1]) else -np.inf))
 
     def identifiability_notes(self, max_relative_std: float = 0.05) -> list[str]:
@@ -164,9 +166,10 @@ class LinearCalibration:
             if acts:
                 lines.append(
                     f"    {n} acts on model modes the test did not identify (d ln f / d ln {n}): "
-                    + ", ".join(f"{m['frequency_hz']:.2f} Hz ({m['sensitivity'][n]:+.3f})"
-                                for m in acts[:3])
-                )  # fmt: skip
+                    + ", ".join(
+                        f"{m['frequency_hz']:.2f} Hz ({m['sensitivity'][n]:+.3f})" for m in acts[:3]
+                    )
+                )
         lines.append(
             "    to determine them: measure the modes they act on (more response there: "
             "level, averages, points); their uncertainty is carried into every later result"
@@ -226,6 +229,6 @@ class LinearCalibration:
             "interval_95": {
                 n: [self.parameters[n] - 1.96 * sd, self.parameters[n] + 1.96 * sd]
                 for n, sd in self.std.items()
-            },  # fmt: skip
+            },
             "unidentified_modes": self.unidentified_modes,
         }

@@ -30,6 +30,10 @@ FREQS = np.unique(
 )
 
 
+# the tests share calibrations made by module fixtures (tens of seconds each)
+pytestmark = pytest.mark.slow
+
+
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     path = tmp_path_factory.mktemp("cal") / "synthetic.h5"
@@ -231,8 +235,11 @@ def test_steps_not_converged_under_force_control_are_left_out(run, calibrated, t
     model, data = run
     path = tmp_path / "one-unsettled-step.h5"
     shutil.copy(data.path, path)
-    row = int(np.flatnonzero((data.levels_n[data.level_index] == 8.0)
-                             & np.isclose(data.frequency_hz, 26.0))[0])  # fmt: skip
+    row = int(
+        np.flatnonzero(
+            (data.levels_n[data.level_index] == 8.0) & np.isclose(data.frequency_hz, 26.0)
+        )[0]
+    )
     with h5py.File(path, "r+") as f:
         response = f["steps/response"][row]
         response[1:] *= 2.0  # the motion channels (channel 0 is the drive force)
@@ -315,11 +322,18 @@ def test_cross_validation_notes_explain_a_scatter_beyond_fim():
 
     def result(std, chi2, p, share):
         return CrossValidation(
-            names=("k_c", "v_c"), folds=folds, estimates=np.zeros((3, 2)), mean=np.ones(2),
-            cov=np.diag(np.square(std)), fim_std=np.ones(2), iterations=[3, 3, 3],
-            seconds=0.0, fold_chi2=np.array(chi2), fold_p=np.array(p),
+            names=("k_c", "v_c"),
+            folds=folds,
+            estimates=np.zeros((3, 2)),
+            mean=np.ones(2),
+            cov=np.diag(np.square(std)),
+            fim_std=np.ones(2),
+            iterations=[3, 3, 3],
+            seconds=0.0,
+            fold_chi2=np.array(chi2),
+            fold_p=np.array(p),
             information_share=np.array(share),
-        )  # fmt: skip
+        )
 
     even = [[0.3, 0.3], [0.35, 0.35], [0.35, 0.35]]
     agree = result([1.2, 0.9], [1.0, 1.1, 0.9], [0.5, 0.2, 0.7], even)
@@ -332,8 +346,9 @@ def test_cross_validation_notes_explain_a_scatter_beyond_fim():
     # misfit, as the calibration, the validation and the diagnosis would judge that fold
     small = result([1.2, 2.6], [1.0, 1.1, 1.4], [0.5, 0.2, 1e-6], even)
     assert small.misfit_folds() == [] and "misfits" not in small.notes()[0]
-    dominant = result([3.0, 1.0], [1.0, 1.0, 1.0], [0.5, 0.5, 0.5],
-                      [[0.05, 0.3], [0.05, 0.3], [0.9, 0.4]])  # fmt: skip
+    dominant = result(
+        [3.0, 1.0], [1.0, 1.0, 1.0], [0.5, 0.5, 0.5], [[0.05, 0.3], [0.05, 0.3], [0.9, 0.4]]
+    )
     (note,) = dominant.notes()
     assert "acc7 @ 6 N carries 90 % of its information" in note and "misfits" not in note
     low = result([0.3, 1.0], [1.0, 1.0, 1.0], [0.5, 0.5, 0.5], even)

@@ -145,8 +145,7 @@ def test_held_values_carry_their_prior_into_the_fitted_ones():
     x_all = sp.to_theta([2.0e11, 4000.0])
     J = np.column_stack([np.ones(50), 0.5 * np.ones(50)])  # d r / d theta of each
     cov_f = np.array([[1e-6]])
-    cov = _with_held(sp, x_all, ["E_beam"], cov_f, {"rho_corner": {}}, J, model, cov_f,
-                     np.zeros(1))  # fmt: skip
+    cov = _with_held(sp, x_all, ["E_beam"], cov_f, {"rho_corner": {}}, J, model, cov_f, np.zeros(1))
     D = sp.dp_dtheta(x_all)
     prior = model.parameters["rho_corner"].prior_rel_std
     G = -0.5  # the fit trades E_beam for rho_corner at 1 : 0.5

@@ -42,12 +42,16 @@ def test_recovers_parameters_without_noise(clean_result) -> None:
     assert max(_errors(clean_result).values()) < 5e-3, _errors(clean_result)
 
 
+@pytest.mark.slow
 def test_recovers_parameters_with_noise(noisy_result) -> None:
     assert noisy_result.success
     assert max(_errors(noisy_result).values()) < 0.02, _errors(noisy_result)
 
 
-@pytest.mark.parametrize("which, tol", [("clean_result", 0.01), ("noisy_result", 0.10)])
+@pytest.mark.parametrize(
+    "which, tol",
+    [("clean_result", 0.01), pytest.param("noisy_result", 0.10, marks=pytest.mark.slow)],
+)
 def test_identified_damping_in_the_model(which: str, tol: float, request) -> None:
     result = request.getfixturevalue(which)
     per_mode = result.model.damping.per_mode
@@ -111,6 +115,7 @@ def test_a_test_that_determines_everything_says_nothing(noisy_result) -> None:
     assert noisy_result.identifiability_notes() == []
 
 
+@pytest.mark.slow
 def test_parameters_the_test_leaves_undetermined_are_named(tmp_path: Path) -> None:
     """4 % damping on the three mount modes (10.8, 11.2 and 15 Hz) merges them into one test
     mode: rho_corner, which acts mostly on them, is undetermined, and the two model modes
@@ -150,14 +155,16 @@ def test_parameters_the_test_leaves_undetermined_are_named(tmp_path: Path) -> No
     assert "held at its nominal value: rho_corner" in notes
 
 
+@pytest.mark.slow
 def test_a_parameter_that_runs_to_a_bound_is_held_not_passed_on(tmp_path: Path) -> None:
     """A frame stiffer than the model's range allows (E_frame 340 GPa, upper bound 300, as a
     file from a rig whose frame differs from the model's would ask): the fit runs E_frame to
     its bound; it is reported as such and held at its nominal value with its prior, the
     calibrated model file does not carry the bound value, and the others are fitted with it
     held and its uncertainty carried into theirs."""
-    run = write_rig_run(tmp_path / "stiff.h5", noise=0.02, seed=4,
-                        values={**TRUE_VALUES, "E_frame": 340e9})  # fmt: skip
+    run = write_rig_run(
+        tmp_path / "stiff.h5", noise=0.02, seed=4, values={**TRUE_VALUES, "E_frame": 340e9}
+    )
     nominal = load_model()
     result = calibrate_linear(nominal, run)
     assert result.status["E_frame"] == "held"
@@ -198,17 +205,28 @@ def test_rejects_a_stepped_sine_file(tmp_path: Path) -> None:
 
 def test_rejects_a_channel_at_an_unknown_point(clean_run, tmp_path: Path) -> None:
     data = read_measurement(clean_run)
-    extra = ChannelInfo("acc14", 14, "y", "acceleration", "m/s^2", 10.0, "mV/g", "response",
-                        0.0055, "A14")  # fmt: skip
+    extra = ChannelInfo(
+        "acc14", 14, "y", "acceleration", "m/s^2", 10.0, "mV/g", "response", 0.0055, "A14"
+    )
     frf = RandomFRF(
         frequency_hz=data.frequency_hz,
         h1=np.column_stack([data.h1, data.h1[:, -1]]),
         coherence=np.column_stack([data.coherence, data.coherence[:, -1]]),
-        force_psd=data.force_psd, n_averages=data.n_averages, window=data.window,
-        overlap=data.overlap, fs_hz=data.fs_hz, rms_force_n=data.rms_force_n,
-    )  # fmt: skip
-    path = write_random(tmp_path / "extra.h5", channels=[*data.channels, extra],
-                        actuator=data.actuator, frf=frf, config={}, setup={})  # fmt: skip
+        force_psd=data.force_psd,
+        n_averages=data.n_averages,
+        window=data.window,
+        overlap=data.overlap,
+        fs_hz=data.fs_hz,
+        rms_force_n=data.rms_force_n,
+    )
+    path = write_random(
+        tmp_path / "extra.h5",
+        channels=[*data.channels, extra],
+        actuator=data.actuator,
+        frf=frf,
+        config={},
+        setup={},
+    )
     with pytest.raises(CalibrationError, match="'acc14'.*no measurement point 14"):
         calibrate_linear(load_model(), path)
 
@@ -225,9 +243,14 @@ def test_rejects_nonlinear_parameters(clean_run) -> None:
 
 @pytest.mark.parametrize(
     "change",
-    [{"method": "simplex"}, {"zeta0": 0.7}, {"calibration_points": "best"},
-     {"band_hz": (50.0, 10.0)}, {"zeta0_schedule": (0.0,)}],
-)  # fmt: skip
+    [
+        {"method": "simplex"},
+        {"zeta0": 0.7},
+        {"calibration_points": "best"},
+        {"band_hz": (50.0, 10.0)},
+        {"zeta0_schedule": (0.0,)},
+    ],
+)
 def test_settings_are_validated(change: dict) -> None:
     with pytest.raises(ValueError):
         dataclasses.replace(LinearCalibrationSettings(), **change)

@@ -33,9 +33,21 @@ def test_calibrate_linear_command(clean_run: Path, tmp_path: Path, capsys) -> No
 
 
 def test_calibrate_linear_options(clean_run: Path, tmp_path: Path, capsys) -> None:
-    argv = ["calibrate-linear", str(clean_run), "--out", str(tmp_path), "--json",
-            "--points", "1,2,3,4,5,6,7,9,10", "--parameters", "E_beam,k_mount",
-            "--band", "5,200", "--zeta0", "0.01"]  # fmt: skip
+    argv = [
+        "calibrate-linear",
+        str(clean_run),
+        "--out",
+        str(tmp_path),
+        "--json",
+        "--points",
+        "1,2,3,4,5,6,7,9,10",
+        "--parameters",
+        "E_beam,k_mount",
+        "--band",
+        "5,200",
+        "--zeta0",
+        "0.01",
+    ]
     args = _parser().parse_args(argv)
     doc = args.func(args)
     assert capsys.readouterr().out == ""  # the caller prints the JSON

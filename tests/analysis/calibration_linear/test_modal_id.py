@@ -99,6 +99,7 @@ def test_weighted_starting_poles_ignore_channels_of_pure_noise() -> None:
     np.testing.assert_allclose([p.frequency_hz for p in found], FR_HZ, rtol=5e-3)
 
 
+@pytest.mark.slow
 def test_rig_modes_under_noise(noisy_run) -> None:
     """2 % noise: all 7 modes in 2-500 Hz, frequencies to 1e-4, damping to 2 %."""
     model = truth_model()

@@ -25,8 +25,9 @@ def _objective(use_phase: bool = False, target_values=TRUE_VALUES) -> EqualizedF
     f_modes, _ = truth.assemble().normal_modes(7)
     freq = metric_frequencies(f_modes, ZETA0, 5)
     placeholder = np.ones((freq.size, len(rows)), complex)
-    obj = EqualizedFRFObjective(model, space, rows, col, freq, placeholder, ZETA0, 5000.0,
-                                use_phase)  # fmt: skip
+    obj = EqualizedFRFObjective(
+        model, space, rows, col, freq, placeholder, ZETA0, 5000.0, use_phase
+    )
     x_true = space.to_theta(np.array([target_values[n] for n in names]))
     target, _ = obj.frf(x_true)
     return EqualizedFRFObjective(model, space, rows, col, freq, target, ZETA0, 5000.0, use_phase)

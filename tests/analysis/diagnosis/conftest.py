@@ -60,9 +60,14 @@ def runs(tmp_path_factory: pytest.TempPathFactory):
                 cache[key] = simulate_linear_test(name, folder / f"{name}_linear.h5", seed=3)
             else:
                 cache[key] = simulate_stepped_sine(
-                    name, folder / f"{name}.h5", levels_n=LEVELS_N, frequencies_hz=FREQUENCIES_HZ,
-                    n_harmonics=12, n_time=256, seed=3,
-                )  # fmt: skip
+                    name,
+                    folder / f"{name}.h5",
+                    levels_n=LEVELS_N,
+                    frequencies_hz=FREQUENCIES_HZ,
+                    n_harmonics=12,
+                    n_time=256,
+                    seed=3,
+                )
         return cache[key] if linear else read_measurement(cache[key])
 
     return get

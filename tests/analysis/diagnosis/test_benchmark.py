@@ -26,8 +26,10 @@ def test_every_hidden_effect_names_a_library_candidate(
 ) -> None:
     from analysis.diagnosis import default_candidates
 
-    labels = {(c.law.kind, c.location.name, c.law.options.get("side"))
-              for c in default_candidates(reference_model)}  # fmt: skip
+    labels = {
+        (c.law.kind, c.location.name, c.law.options.get("side"))
+        for c in default_candidates(reference_model)
+    }
     for truth, effect in TRUE_EFFECTS.items():
         assert effect in labels, truth
     monkeypatch.setenv("CLEARANCE_RIG_CACHE", str(tmp_path))

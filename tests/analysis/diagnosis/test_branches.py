@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from analysis import predict_branches
 from analysis.diagnosis import BranchMatchedPredictor, compare
@@ -42,8 +43,9 @@ def test_the_same_model_at_the_same_steps_is_solved_once(runs, reference_model, 
     data = runs("two_sided_stop")
     sweeps = []
     real = predict_branches.solve_steps
-    monkeypatch.setattr(predict_branches, "solve_steps",
-                        lambda *a, **k: sweeps.append(1) or real(*a, **k))  # fmt: skip
+    monkeypatch.setattr(
+        predict_branches, "solve_steps", lambda *a, **k: sweeps.append(1) or real(*a, **k)
+    )
     pred = BranchMatchedPredictor(reference_model, data)
     gap = reference_model.parameters["gap"].value
     rows = np.arange(data.n_steps // 2)
@@ -52,8 +54,9 @@ def test_the_same_model_at_the_same_steps_is_solved_once(runs, reference_model, 
     assert n > 0
     again = pred.predict({"gap": 1.1 * gap}, ["gap"], rows=rows)
     assert len(sweeps) == n
-    fresh = BranchMatchedPredictor(reference_model, data).predict({"gap": 1.1 * gap}, ["gap"],
-                                                                  rows=rows)  # fmt: skip
+    fresh = BranchMatchedPredictor(reference_model, data).predict(
+        {"gap": 1.1 * gap}, ["gap"], rows=rows
+    )
     np.testing.assert_array_equal(again.frf, fresh.frf)
     np.testing.assert_array_equal(again.d_frf["gap"], fresh.d_frf["gap"])
     for values, at in (({"gap": 1.2 * gap}, rows), ({"gap": 1.2 * gap}, rows[:-1])):
@@ -129,6 +132,7 @@ def _fold_run(path, model, force: np.ndarray) -> tuple[object, int]:
     return read_measurement(path), len(picks) - 2
 
 
+@pytest.mark.slow
 def test_a_step_held_past_the_fold_is_predicted_on_the_turned_back_branch(
     tmp_path, reference_model, monkeypatch
 ) -> None:

@@ -13,8 +13,15 @@ def test_candidates_are_the_library_at_every_plausible_location(reference_model)
     kinds = {c.law.kind for c in cands}
     # the simulator's hysteretic element is registered in this session, yet never a candidate
     assert "jenkins" not in kinds
-    assert {"cubic_spring", "hertz_contact", "coulomb_friction", "quadratic_damper", "mass",
-            "joint_spring", "parameter"} <= kinds  # fmt: skip
+    assert {
+        "cubic_spring",
+        "hertz_contact",
+        "coulomb_friction",
+        "quadratic_damper",
+        "mass",
+        "joint_spring",
+        "parameter",
+    } <= kinds
     locations = {c.location.name for c in cands}
     assert {"point 7", "point 13", "mounts", "joint clamp rz"} <= locations
     assert all(c.law.kind != "mass" or c.location.point is not None for c in cands)

@@ -33,10 +33,17 @@ def _held_file(path, model_run, reference_model):
     pb, points = pred.solve(rows=np.arange(src.n_steps))
     targets = np.concatenate([src.force_targets, np.zeros((src.force_targets.shape[0], 1))], 1)
     w = create_stepped_sine(
-        path, channels=list(src.channels), actuator=src.actuator, levels_n=list(src.levels_n),
-        orders_num=[1, 2, 3, 4], orders_den=[1, 1, 1, 1], force_targets=targets, config={},
-        setup={}, overwrite=True,
-    )  # fmt: skip
+        path,
+        channels=list(src.channels),
+        actuator=src.actuator,
+        levels_n=list(src.levels_n),
+        orders_num=[1, 2, 3, 4],
+        orders_den=[1, 1, 1, 1],
+        force_targets=targets,
+        config={},
+        setup={},
+        overwrite=True,
+    )
     rng = np.random.default_rng(0)
     with w:
         for i in range(src.n_steps):
@@ -45,14 +52,24 @@ def _held_file(path, model_run, reference_model):
             resp = np.concatenate([src.response[i], np.zeros((src.response.shape[1], 1))], 1)
             resp[0, 3] = f4
             std = np.concatenate([src.response_std[i], src.response_std[i][:, 2:3]], 1)
-            w.append_step(StepRecord(
-                plan_index=i, level_index=int(src.level_index[i]), sweep_direction=1,
-                frequency_target_hz=float(src.frequency_hz[i]),
-                frequency_hz=float(src.frequency_hz[i]), force=force, force_std=std[0],
-                response=resp, response_std=std, drive=np.append(src.drive[i], 0),
-                n_blocks=48, control_iterations=2, control_converged=i != 5,
-                control_error=0.0,
-            ))  # fmt: skip
+            w.append_step(
+                StepRecord(
+                    plan_index=i,
+                    level_index=int(src.level_index[i]),
+                    sweep_direction=1,
+                    frequency_target_hz=float(src.frequency_hz[i]),
+                    frequency_hz=float(src.frequency_hz[i]),
+                    force=force,
+                    force_std=std[0],
+                    response=resp,
+                    response_std=std,
+                    drive=np.append(src.drive[i], 0),
+                    n_blocks=48,
+                    control_iterations=2,
+                    control_converged=i != 5,
+                    control_error=0.0,
+                )
+            )
         w.finish("success", "")
     return read_measurement(path)
 

@@ -11,13 +11,21 @@ from tests.analysis.diagnosis.conftest import truth_as_model
 
 # limits of processor time above the benchmark's: the verifications must converge on the reduced
 # runs
-QUICK = DiagnosisSettings(n_verify=2, n_refine=4, n_starts=0, workers=2, verify_iterations=10,
-                          verify_seconds=20.0, time_budget_s=100.0)  # fmt: skip
+QUICK = DiagnosisSettings(
+    n_verify=2,
+    n_refine=4,
+    n_starts=0,
+    workers=2,
+    verify_iterations=10,
+    verify_seconds=20.0,
+    time_budget_s=100.0,
+)
 
 
 def _subset(model, locations, kinds):
-    return [c for c in default_candidates(model)
-            if c.location.name in locations and c.law.kind in kinds]  # fmt: skip
+    return [
+        c for c in default_candidates(model) if c.location.name in locations and c.law.kind in kinds
+    ]
 
 
 def _added(result, model, data, tmp_path, linear_run=None):
@@ -25,8 +33,9 @@ def _added(result, model, data, tmp_path, linear_run=None):
     best = result.group[0]
     values, known = best.start_values()
     out = tmp_path / "augmented.toml"
-    added = augment(model, data, best.candidate, values=values, known=known,
-                    linear_run=linear_run, out=out)  # fmt: skip
+    added = augment(
+        model, data, best.candidate, values=values, known=known, linear_run=linear_run, out=out
+    )
     assert out.exists() and model.source != str(out)  # a new file, the old model kept
     assert added.residual_drop >= 5.0 and added.after.rms_over_noise <= 1.5, added.summary()
     stages = [h["stage"] for h in added.history]
@@ -51,8 +60,11 @@ def test_a_hidden_damper_is_found_added_and_the_error_falls(runs, reference_mode
     data = runs("damper_p5")
     # on the reduced run the beam's points 5-7 are told apart only by a fraction of the
     # noise; the full run of the benchmark places the damper at point 5 among all points
-    cands = _subset(reference_model, ("point 4", "point 5"),
-                    ("quadratic_damper", "linear_damper", "cubic_spring"))  # fmt: skip
+    cands = _subset(
+        reference_model,
+        ("point 4", "point 5"),
+        ("quadratic_damper", "linear_damper", "cubic_spring"),
+    )
     result = diagnose(reference_model, data, candidates=cands, settings=QUICK)
     assert result.verdict == "explained", result.summary()
     assert result.rank_of("quadratic_damper", "point 5") == 1
@@ -66,10 +78,10 @@ def test_a_mass_is_found_on_the_linear_test_and_reported_as_linear(
     runs, reference_model, tmp_path
 ) -> None:
     data, linear = runs("mass_loading"), runs("mass_loading", linear=True)
-    cands = _subset(reference_model, ("point 6", "point 7"),
-                    ("mass", "quadratic_damper", "cubic_spring"))  # fmt: skip
-    result = diagnose(reference_model, data, linear_run=linear, candidates=cands,
-                      settings=QUICK)  # fmt: skip
+    cands = _subset(
+        reference_model, ("point 6", "point 7"), ("mass", "quadratic_damper", "cubic_spring")
+    )
+    result = diagnose(reference_model, data, linear_run=linear, candidates=cands, settings=QUICK)
     assert result.verdict == "explained", result.summary()
     assert result.rank_of("mass", "point 6") == 1
     best = result.group[0]
@@ -82,8 +94,9 @@ def test_a_mass_is_found_on_the_linear_test_and_reported_as_linear(
 @pytest.mark.slow
 def test_a_strong_effect_the_second_stop_is_found_at_the_tip(runs, reference_model, tmp_path):
     data = runs("two_sided_stop")
-    cands = _subset(reference_model, ("point 6", "point 7"),
-                    ("hertz_contact", "two_sided_gap", "cubic_spring"))  # fmt: skip
+    cands = _subset(
+        reference_model, ("point 6", "point 7"), ("hertz_contact", "two_sided_gap", "cubic_spring")
+    )
     result = diagnose(reference_model, data, candidates=cands, settings=QUICK)
     assert result.verdict == "explained", result.summary()
     assert result.rank_of("hertz_contact", "point 7", side=1) == 1
@@ -106,8 +119,9 @@ def test_hardening_mounts_are_placed_at_the_mounts(runs, reference_model, tmp_pa
 @pytest.mark.slow
 def test_friction_in_the_clamp_is_found_in_the_clamp(runs, reference_model, tmp_path) -> None:
     data = runs("clamp_friction")
-    cands = _subset(reference_model, ("joint clamp rz", "point 5"),
-                    ("coulomb_friction", "linear_damper"))  # fmt: skip
+    cands = _subset(
+        reference_model, ("joint clamp rz", "point 5"), ("coulomb_friction", "linear_damper")
+    )
     result = diagnose(reference_model, data, candidates=cands, settings=QUICK)
     assert result.verdict == "explained", result.summary()
     assert result.rank_of("coulomb_friction", "joint clamp rz") == 1

@@ -18,6 +18,7 @@ from analysis.report.diagnosis_figures import (
 )
 
 
+@pytest.mark.slow
 def test_figures_are_written(runs, reference_model, tmp_path) -> None:
     data = runs("two_sided_stop")
     cmp = compare(reference_model, data, predictor=BranchMatchedPredictor(reference_model, data))
@@ -39,15 +40,28 @@ def _run(argv, capsys):
     return out, capsys.readouterr()
 
 
+@pytest.mark.slow
 def test_compare_and_diagnose_commands(runs, reference_model, tmp_path, capsys) -> None:
     data = runs("reference")
     model_path = reference_model.save(tmp_path / "model.toml")
-    out, text = _run(["compare", str(data.path), "--model", str(model_path),
-                      "--figures", str(tmp_path / "fig")], capsys)  # fmt: skip
+    out, text = _run(
+        ["compare", str(data.path), "--model", str(model_path), "--figures", str(tmp_path / "fig")],
+        capsys,
+    )
     assert "chi2/dof" in text.out and out["rms_over_noise"] < 1.3
     assert (tmp_path / "fig" / "residual_sensor_order_level.png").exists()
-    out, text = _run(["diagnose", str(data.path), "--model", str(model_path), "--json",
-                      "--rescreen-ratio", "0.4"], capsys)  # fmt: skip
+    out, text = _run(
+        [
+            "diagnose",
+            str(data.path),
+            "--model",
+            str(model_path),
+            "--json",
+            "--rescreen-ratio",
+            "0.4",
+        ],
+        capsys,
+    )
     assert out["verdict"] == "adequate"
     json.dumps(out)
 

@@ -25,8 +25,11 @@ def _chi2_on(model, data, rows) -> float:
 def test_fitting_again_with_the_weights_at_the_fit_scores_better(runs, reference_model) -> None:
     data = runs("clamp_friction")
     rows = np.flatnonzero(np.asarray(data.level_index) < 2)  # 2 and 5 N; 8 N held out
-    cand = next(c for c in default_candidates(reference_model)
-                if c.label == "coulomb_friction with a joint spring at joint clamp rz")  # fmt: skip
+    cand = next(
+        c
+        for c in default_candidates(reference_model)
+        if c.label == "coulomb_friction with a joint spring at joint clamp rz"
+    )
     # a far start (the truth: slip moment 3 N m, 5e4 N m/rad): its tangents near the jump
     # differ from the fitted model's
     start, names = cand.apply(reference_model, {"f_slip": 1.5, "k_joint": 1e5})
@@ -104,8 +107,11 @@ def test_recomputing_the_weights_at_a_stall_scores_no_worse(runs, reference_mode
     the weights recomputed at the stall 0.971 -> 0.968; by compare 0.96562 and 0.96558)."""
     data = runs("clamp_friction")
     rows = np.flatnonzero(np.asarray(data.level_index) < 2)
-    cand = next(c for c in default_candidates(reference_model)
-                if c.label == "coulomb_friction with a joint spring at joint clamp rz")  # fmt: skip
+    cand = next(
+        c
+        for c in default_candidates(reference_model)
+        if c.label == "coulomb_friction with a joint spring at joint clamp rz"
+    )
     start, names = cand.apply(reference_model, {"f_slip": 1.5, "k_joint": 1e5})
     once = refit(start, data, names, rows=rows, max_iterations=15)
     drop = refit(start, data, names, rows=rows, max_iterations=15, reweight_drop=2.0)
@@ -115,6 +121,7 @@ def test_recomputing_the_weights_at_a_stall_scores_no_worse(runs, reference_mode
     assert _chi2_on(drop.model, data, rows) <= _chi2_on(once.model, data, rows) * (1 + 1e-6)
 
 
+@pytest.mark.slow
 def test_the_start_model_is_not_solved_again_to_rank_the_starts(
     runs, reference_model, monkeypatch
 ) -> None:
@@ -136,6 +143,7 @@ def test_the_start_model_is_not_solved_again_to_rank_the_starts(
     assert two.start_costs[1] > two.start_costs[0]  # the model's own k_c fits better
 
 
+@pytest.mark.slow
 def test_the_damping_derivative_is_that_of_solving_the_sweeps_again(runs, reference_model) -> None:
     """A modal damping ratio's derivative: each step solved at the shifted ratio from its own
     solution gives the forward difference of solving the whole sweeps again there (to 1e-5 of
@@ -147,8 +155,11 @@ def test_the_damping_derivative_is_that_of_solving_the_sweeps_again(runs, refere
     from analysis.diagnosis.verify import calibration_rows
 
     data = runs("clamp_friction")
-    cand = next(c for c in default_candidates(reference_model)
-                if c.label == "coulomb_friction with a joint spring at joint clamp rz")  # fmt: skip
+    cand = next(
+        c
+        for c in default_candidates(reference_model)
+        if c.label == "coulomb_friction with a joint spring at joint clamp rz"
+    )
     model, names = cand.apply(reference_model, {"f_slip": 2.5, "k_joint": 6e4})
     rows = calibration_rows(data)
     zeta = model.damping.per_mode.get(4, model.damping.default_zeta)

@@ -6,16 +6,20 @@ from analysis.diagnosis import Screen, default_candidates
 
 
 def _subset(model, locations, kinds):
-    return [c for c in default_candidates(model)
-            if c.location.name in locations and c.law.kind in kinds]  # fmt: skip
+    return [
+        c for c in default_candidates(model) if c.location.name in locations and c.law.kind in kinds
+    ]
 
 
 def test_nothing_beats_the_true_model(runs, reference_model) -> None:
     data = runs("reference")
     screen = Screen(reference_model, data)
     base = screen.baseline()
-    cands = _subset(reference_model, ("point 5", "point 7", "mounts"),
-                    ("cubic_spring", "quadratic_damper", "mass", "hertz_contact"))  # fmt: skip
+    cands = _subset(
+        reference_model,
+        ("point 5", "point 7", "mounts"),
+        ("cubic_spring", "quadratic_damper", "mass", "hertz_contact"),
+    )
     fits = screen.run(cands, n_refine=3)
     assert min(f.bic for f in fits) > base.bic - 10.0
     # the model's own contact is recovered from the data's states
@@ -26,9 +30,18 @@ def test_nothing_beats_the_true_model(runs, reference_model) -> None:
 def test_a_quadratic_damper_is_the_best_law(runs, reference_model) -> None:
     data = runs("damper_p5")
     screen = Screen(reference_model, data)
-    cands = _subset(reference_model, ("point 5", "point 6", "point 7"),
-                    ("quadratic_damper", "linear_damper", "cubic_damper", "coulomb_friction",
-                     "cubic_spring", "mass"))  # fmt: skip
+    cands = _subset(
+        reference_model,
+        ("point 5", "point 6", "point 7"),
+        (
+            "quadratic_damper",
+            "linear_damper",
+            "cubic_damper",
+            "coulomb_friction",
+            "cubic_spring",
+            "mass",
+        ),
+    )
     fits = screen.run(cands, n_refine=4)
     # on this reduced run the dampers lead; which law and which beam point is for the
     # verification in the full model to say (the screen proposes, it does not decide)

@@ -30,9 +30,24 @@ def _screened(model, label, bic=0.0, **kw) -> ScreenFit:
 
 
 def _job(model, data_path, cand, values, **kw) -> VerifyJob:
-    return VerifyJob(model.to_toml(), str(model.source), str(data_path), None, cand,
-                     dict(values), {}, None, 10, 0, 0, kw.pop("start_toml", None), 9, 128,
-                     60.0, **kw)  # fmt: skip
+    return VerifyJob(
+        model.to_toml(),
+        str(model.source),
+        str(data_path),
+        None,
+        cand,
+        dict(values),
+        {},
+        None,
+        10,
+        0,
+        0,
+        kw.pop("start_toml", None),
+        9,
+        128,
+        60.0,
+        **kw,
+    )
 
 
 def test_further_starts_only_for_coefficients_at_unmeasured_dofs(reference_model) -> None:
@@ -95,15 +110,20 @@ def test_unmeasured_picks_are_refined_whatever_their_first_pass(reference_model)
 
         def refined(self, f):
             self.calls.append(f.candidate.label)
-            return _screened(m, f.candidate.label,
-                             min(f.bic, refined.get(f.candidate.label, f.bic)))  # fmt: skip
+            return _screened(
+                m, f.candidate.label, min(f.bic, refined.get(f.candidate.label, f.bic))
+            )
 
     screen = Refiner()
     fits = [_screened(m, label, bic) for label, bic in first_pass.items()]
     first, second = _shortlist(screen, fits, Evidence([]), 2, 0.0)
     labels = [f.candidate.label for f in first]
-    assert labels == ["hertz_contact (above) at point 6", "hertz_contact (above) at point 7",
-                      "cubic_spring at mounts", "cubic_spring at point 5"]  # fmt: skip
+    assert labels == [
+        "hertz_contact (above) at point 6",
+        "hertz_contact (above) at point 7",
+        "cubic_spring at mounts",
+        "cubic_spring at point 5",
+    ]
     # every candidate at an unmeasured location is refined, not only the first pass's best
     assert set(screen.calls) == {label for label in first_pass if "at point" not in label}
     # the joint's candidate explains nothing: not picked as an unmeasured location's law
@@ -116,8 +136,15 @@ def _verified(cand, rms: float, message: str = "", history=(), parameters=None):
 
     from analysis.diagnosis.verify import Verified
 
-    return Verified(cand, dict(parameters or {}), np.full(10, 2.0 * rms**2), 2, "",
-                    history=list(history), message=message)  # fmt: skip
+    return Verified(
+        cand,
+        dict(parameters or {}),
+        np.full(10, 2.0 * rms**2),
+        2,
+        "",
+        history=list(history),
+        message=message,
+    )
 
 
 def test_a_law_in_a_joint_has_no_neighbouring_point(reference_model) -> None:
@@ -152,14 +179,26 @@ def test_the_best_law_walks_to_the_next_points_from_its_fit(reference_model) -> 
 
     m = reference_model
     points = (5, 6, 4, 7, 11)
-    fits = [_screened(m, f"hertz_contact (above) at point {p}", -1e4 + i,
-                      values={"k_c": 1e5, "v": 1.0, "gap": 5e-4})
-            for i, p in enumerate(points)]  # fmt: skip
+    fits = [
+        _screened(
+            m,
+            f"hertz_contact (above) at point {p}",
+            -1e4 + i,
+            values={"k_c": 1e5, "v": 1.0, "gap": 5e-4},
+        )
+        for i, p in enumerate(points)
+    ]
     fits.insert(2, _screened(m, "cubic_spring at point 4"))
     best_cand = fits[0].candidate
     names = best_cand.parameter_names()
-    fitted = {names["k_c"]: 9.2e5, names["v"]: 52.5, names["gap"]: 8.4e-4,
-              "k_c": 4.69e5, "gap": 6.06e-4, "v_c": 27.1}  # fmt: skip
+    fitted = {
+        names["k_c"]: 9.2e5,
+        names["v"]: 52.5,
+        names["gap"]: 8.4e-4,
+        "k_c": 4.69e5,
+        "gap": 6.06e-4,
+        "v_c": 27.1,
+    }
     best = _verified(best_cand, 3.76, parameters=fitted)
     walk = _walk_jobs(best, fits, [fits[0].candidate, fits[1].candidate], 2)
     assert [f.candidate.label for f, _, _ in walk] == [
@@ -305,6 +344,8 @@ def test_at_an_unmeasured_location_the_simplest_of_the_next_laws_go_on(reference
     fits = [_screened(m, label) for label in refined]
     lead = fits[0].candidate
     laws = _other_laws(Screen(), fits, lead, [lead, fits[-1].candidate], 2)
-    assert [f.candidate.label for f in laws] == ["cubic_spring at mounts",
-                                                 "two_sided_gap at mounts"]  # fmt: skip
+    assert [f.candidate.label for f in laws] == [
+        "cubic_spring at mounts",
+        "two_sided_gap at mounts",
+    ]
     assert all(f.refined for f in laws)

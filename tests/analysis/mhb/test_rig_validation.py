@@ -20,9 +20,15 @@ from analysis.model import load_model
 from analysis.system import build_linear, build_problem
 
 PAPER = {
-    "E_frame": 205e9, "E_corner": 128e9, "E_beam": 201e9, "rho_corner": 5175.0,
-    "k_mount": 57989.0, "k_c": 4.51e5, "gap": 0.60e-3, "v_c": 25.21,
-}  # fmt: skip
+    "E_frame": 205e9,
+    "E_corner": 128e9,
+    "E_beam": 201e9,
+    "rho_corner": 5175.0,
+    "k_mount": 57989.0,
+    "k_c": 4.51e5,
+    "gap": 0.60e-3,
+    "v_c": 25.21,
+}
 
 
 @pytest.fixture(scope="module")

@@ -69,6 +69,7 @@ def test_unconverged_point_is_flagged_with_reason():
     assert "maximum iterations" in p.message
 
 
+@pytest.mark.slow
 def test_two_dof_hertz_contact_chain_matches_time_integration():
     """The standard unilateral-contact example: orders 1-3 within 1 % of the fundamental."""
     pb = contact_chain()

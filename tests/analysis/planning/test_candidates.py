@@ -19,8 +19,14 @@ def test_paper_candidates_give_the_papers_14700_configurations():
     cand = paper_candidates()
     assert cand.n_configurations == 14700
     assert [r.label for r in cand.ranges] == [
-        "[21-40]", "[41-60]", "[61-80]", "[81-100]", "[101-120]", "[121-140]", "[141-160]"
-    ]  # fmt: skip
+        "[21-40]",
+        "[41-60]",
+        "[61-80]",
+        "[81-100]",
+        "[101-120]",
+        "[121-140]",
+        "[141-160]",
+    ]
     np.testing.assert_allclose(cand.force(4.0), [4.0, 0.08, 0.08])
     assert quick_candidates().n_configurations == 35 * 3 * 3 * 2
 

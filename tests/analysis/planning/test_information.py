@@ -40,9 +40,13 @@ def test_fim_equals_the_direct_sum_with_a_finite_difference_jacobian(rig):
     to 2e-4 of sqrt(F_ii F_jj) (the sensitivities' validated accuracy)."""
     frange = FrequencyRange(24.0, 28.0, 1.0)  # 4 N at point 3: the tip hits the stop here
     cand = Candidates(
-        sensors=(5, 7), n_sensors=2, actuators=(3,), levels_n=(4.0,), n_levels=1,
+        sensors=(5, 7),
+        n_sensors=2,
+        actuators=(3,),
+        levels_n=(4.0,),
+        n_levels=1,
         ranges=(frange,),
-    )  # fmt: skip
+    )
     result = plan_tests(rig, cand, executor=None, settings=PlanSettings(refine_band_hz=None))
 
     force = np.array([4.0, 0.08, 0.08])

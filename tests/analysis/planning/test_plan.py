@@ -87,9 +87,13 @@ def test_refining_the_steps_lowers_the_kc_gap_correlation(rig):
 
 def test_a_configuration_outside_the_candidates_can_be_studied(rig):
     cand = Candidates(
-        sensors=(6, 7), n_sensors=2, actuators=(3,), levels_n=(4.0,), n_levels=1,
+        sensors=(6, 7),
+        n_sensors=2,
+        actuators=(3,),
+        levels_n=(4.0,),
+        n_levels=1,
         ranges=(CONTACT_RANGE,),
-    )  # fmt: skip
+    )
     other = Configuration(3, (3, 7), (2.0, 6.0), FrequencyRange(24.0, 30.0, 1.0))
     res = plan_tests(
         rig, cand, executor=None, chosen=other, settings=PlanSettings(refine_band_hz=None)

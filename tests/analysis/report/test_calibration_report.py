@@ -20,13 +20,25 @@ NL_STD = {"k_c": 1.1e4, "gap": 1.0e-5, "v_c": 1.5}
 LIN = {"E_frame": 2.04e11, "E_corner": 1.30e11, "k_mount": 5.0e4, "rho_corner": 5200.0}
 LIN_STD = {"E_frame": 1.0e9, "E_corner": 2.0e10, "k_mount": 1.0e2, "rho_corner": 40.0}
 TRUTH = {
-    "E_frame": 2.05e11, "E_corner": 1.28e11, "E_beam": 2.01e11, "rho_corner": 5175.0,
-    "k_mount": 57989.0, "k_c": 4.51e5, "gap": 6.0e-4, "v_c": 25.21,
-}  # fmt: skip
+    "E_frame": 2.05e11,
+    "E_corner": 1.28e11,
+    "E_beam": 2.01e11,
+    "rho_corner": 5175.0,
+    "k_mount": 57989.0,
+    "k_c": 4.51e5,
+    "gap": 6.0e-4,
+    "v_c": 25.21,
+}
 TRUTH_UNITS = {
-    "E_frame": "Pa", "E_corner": "Pa", "E_beam": "Pa", "rho_corner": "kg/m^3",
-    "k_mount": "N/m", "k_c": "N/m^1.5", "gap": "m", "v_c": "N s^2/m^2",
-}  # fmt: skip
+    "E_frame": "Pa",
+    "E_corner": "Pa",
+    "E_beam": "Pa",
+    "rho_corner": "kg/m^3",
+    "k_mount": "N/m",
+    "k_c": "N/m^1.5",
+    "gap": "m",
+    "v_c": "N s^2/m^2",
+}
 
 
 @pytest.fixture
@@ -82,12 +94,27 @@ def study(tmp_path: Path) -> Path:
         "notes": ["the `v_c` spread is **within** the noise"],
     }
     (nl_dir / "crossval.json").write_text(json.dumps(cv))
-    val = {"level_n": 8.0, "channels": ["point 7"], "chi2_per_dof": 1.4, "within_2sigma": 0.93,
-           "threshold": 2.0, "passed": True, "n_steps": 2}  # fmt: skip
+    val = {
+        "level_n": 8.0,
+        "channels": ["point 7"],
+        "chi2_per_dof": 1.4,
+        "within_2sigma": 0.93,
+        "threshold": 2.0,
+        "passed": True,
+        "n_steps": 2,
+    }
     (nl_dir / "validation.json").write_text(json.dumps(val))
     H = np.array([1 + 1j, 2 - 1j]).reshape(2, 1, 1)
-    plot_validation(np.array([25.0, 26.0]), H, 0.1 * abs(H), H, 0.05 * abs(H), ["point 7"],
-                    ["1"], nl_dir / "validation.png")  # fmt: skip
+    plot_validation(
+        np.array([25.0, 26.0]),
+        H,
+        0.1 * abs(H),
+        H,
+        0.05 * abs(H),
+        ["point 7"],
+        ["1"],
+        nl_dir / "validation.png",
+    )
     lin = {
         "parameters": LIN,
         "std": LIN_STD,
@@ -96,18 +123,22 @@ def study(tmp_path: Path) -> Path:
             "E_corner": "held",
             "k_mount": "at_bound",
             "rho_corner": "fitted",
-        },  # fmt: skip
+        },
         "status_reason": {
             "E_corner": "no identified mode is sensitive to it",
             "k_mount": "at the upper bound 5e4 N/m",
-        },  # fmt: skip
+        },
         "prior_rel_std": {"E_corner": 0.1},
         "units": {"E_frame": "Pa", "E_corner": "Pa", "k_mount": "N/m", "rho_corner": "kg/m^3"},
         "damping_per_mode": {"1": 0.041, "2": 0.035},
     }
     (lin_dir / "linear_calibration.json").write_text(json.dumps(lin))
-    doc = {"source": "simulated rig, truth 'reference'", "parameters": TRUTH,
-           "units": TRUTH_UNITS, "modal_damping": {"1": 0.04, "2": 0.04}}  # fmt: skip
+    doc = {
+        "source": "simulated rig, truth 'reference'",
+        "parameters": TRUTH,
+        "units": TRUTH_UNITS,
+        "modal_damping": {"1": 0.04, "2": 0.04},
+    }
     (tmp_path / "truth.json").write_text(json.dumps(doc))
     return tmp_path
 

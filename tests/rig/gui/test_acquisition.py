@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 from PySide6 import QtCore
 
 from analysis.measurement_file import read_measurement
@@ -60,13 +61,9 @@ def test_a_wrong_setting_is_shown_next_to_its_field(qtbot, lock_dir, tmp_path):
     assert controls.start.isEnabled()
 
 
-def test_pretest_then_a_whole_run_with_pause_and_resume(qtbot, lock_dir, tmp_path):
-    window = make_window(qtbot, lock_dir)
-    path = tmp_path / "quick.h5"
-    prepare_run(window, path)
-    acq = window.acquisition
+def _pretest_alone(qtbot, acq, path) -> None:
+    """A pretest alone: every check passes and no file is written."""
     controls, status = acq.controls, acq.status
-
     _click(qtbot, controls.pretest)
     qtbot.waitUntil(lambda: acq.last_end is not None, timeout=RUN_MS)
     assert acq.last_end.status == "success", acq.last_end.message
@@ -75,6 +72,30 @@ def test_pretest_then_a_whole_run_with_pause_and_resume(qtbot, lock_dir, tmp_pat
     assert report is not None and report.ok and report.gain_n_per_v is not None
     assert status.pretest.rowCount() == 4
     assert [status.pretest.item(r, 1).text() for r in range(4)] == ["ok"] * 4
+
+
+def _next_file_is_new(acq, path) -> None:
+    """The next run gets a new file next to this one: ready, and nothing is overwritten."""
+    controls = acq.controls
+    box = acq.setup_panel.run_box
+    assert Path(box.path.text()) == path.with_name("quick-2.h5")
+    assert acq.setup_panel.valid and controls.start.isEnabled() and not controls.pause.isEnabled()
+    box.path.setText(str(path))
+    assert not acq.setup_panel.check() and not controls.start.isEnabled()
+    assert "quick.h5 exists" in acq.setup_panel.problem
+    assert "'New file'" in acq.setup_panel.problem  # and says what to do
+    box.path.setText(str(path.with_name("quick-2.h5")))
+
+
+@pytest.mark.slow
+def test_pretest_then_a_whole_run_with_pause_and_resume(qtbot, lock_dir, tmp_path):
+    window = make_window(qtbot, lock_dir)
+    path = tmp_path / "quick.h5"
+    prepare_run(window, path)
+    acq = window.acquisition
+    controls = acq.controls
+
+    _pretest_alone(qtbot, acq, path)
 
     acq.last_end = None
     _click(qtbot, controls.start)
@@ -109,20 +130,13 @@ def test_pretest_then_a_whole_run_with_pause_and_resume(qtbot, lock_dir, tmp_pat
     f, lv, sweep, h = acq.live.frf(acq.live.channel_names.index("acc7"))
     rows = lv == 0
     np.testing.assert_allclose(h[rows, 0], data.select(level_index=0).frf("acc7")[:, 0], rtol=1e-12)
-    # the next run gets a new file next to this one: ready, and nothing is overwritten
-    box = acq.setup_panel.run_box
-    assert Path(box.path.text()) == path.with_name("quick-2.h5")
-    assert acq.setup_panel.valid and controls.start.isEnabled() and not controls.pause.isEnabled()
-    box.path.setText(str(path))
-    assert not acq.setup_panel.check() and not controls.start.isEnabled()
-    assert "quick.h5 exists" in acq.setup_panel.problem
-    assert "'New file'" in acq.setup_panel.problem  # and says what to do
-    box.path.setText(str(path.with_name("quick-2.h5")))
+    _next_file_is_new(acq, path)
     # the finished run opened in the browser
     assert window.browser.path == path and window.browser.step_count() == 10
     screenshot(window, "acquisition-finished.png")
 
 
+@pytest.mark.slow
 def test_abort_then_browse_the_interrupted_file_and_complete_it(qtbot, lock_dir, tmp_path):
     window = make_window(qtbot, lock_dir)
     path = tmp_path / "aborted.h5"
@@ -159,6 +173,7 @@ def test_abort_then_browse_the_interrupted_file_and_complete_it(qtbot, lock_dir,
     assert browser.step_count() == 10 and "SUCCESS" in browser.header.text()
 
 
+@pytest.mark.slow
 def test_amplifier_status_overload_alarm_clear_and_resume(qtbot, lock_dir, tmp_path):
     model = AmplifierModel()
     model.enable()

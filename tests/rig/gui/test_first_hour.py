@@ -70,6 +70,7 @@ def test_the_library_check_loads_real_libraries():
         assert set(missing) <= set(XCB_LIBRARIES)
 
 
+@pytest.mark.slow
 def test_rig_gui_without_a_display_exits_with_a_message_not_a_core_dump(tmp_path):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     env.pop("QT_QPA_PLATFORM", None)
@@ -156,6 +157,7 @@ def test_the_default_file_is_new_and_an_existing_one_says_what_to_do(
 # -- "Compare with a model…" compares ------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_compare_with_a_model_from_the_browser_shows_the_comparison(qtbot, lock_dir, damper_run):
     from tests.rig.gui.gui_helpers import make_window
 

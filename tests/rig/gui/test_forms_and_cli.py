@@ -131,6 +131,7 @@ def test_live_run_progress_and_time_left():
     assert live.levels_n() == {0: 2.0}
 
 
+@pytest.mark.slow
 def test_rig_gui_command_starts_the_window(qtbot, monkeypatch, damper_run, reference_model_file):
     from rig.cli import main
     from rig.gui.app import LabWindow

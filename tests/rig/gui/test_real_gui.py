@@ -29,6 +29,7 @@ TITLE = "clearance-rig lab"
 SCREEN = (1600, 1000)
 
 pytestmark = [
+    pytest.mark.slow,
     pytest.mark.xvfb,
     pytest.mark.skipif(
         shutil.which("Xvfb") is None,

@@ -63,6 +63,7 @@ def test_events_decode_to_what_the_engine_published():
     np.testing.assert_array_equal(back.drive_v, record.drive)
 
 
+@pytest.mark.slow
 def test_a_run_on_the_service_drawn_live_with_pause_and_resume(qtbot, service, tmp_path):
     controller = ServiceRunController.connect(str(service.sdir))
     window = LabWindow(controller)

@@ -6,10 +6,14 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from PySide6 import QtCore
 
 from analysis.model import load_model
 from tests.rig.gui.gui_helpers import make_window, screenshot
+
+# a diagnosis and a calibration, each through the GUI
+pytestmark = pytest.mark.slow
 
 TASK_MS = 120_000
 

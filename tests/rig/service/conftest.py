@@ -119,12 +119,22 @@ class ServiceProcess:
         out = open(self.stdout_path, "w")  # noqa: SIM115 - the child writes to it
         self.proc = self.procs.popen(
             [
-                "service", "start", "--backend", "sim", "--setup", self.bench / "setup.toml",
-                "--service-dir", self.sdir, "--port", 0, "--lock-dir", self.lock_dir,
+                "service",
+                "start",
+                "--backend",
+                "sim",
+                "--setup",
+                self.bench / "setup.toml",
+                "--service-dir",
+                self.sdir,
+                "--port",
+                0,
+                "--lock-dir",
+                self.lock_dir,
             ],
             stdout=out,
             stderr=subprocess.STDOUT,
-        )  # fmt: skip
+        )
         out.close()
 
         def ready():

@@ -102,7 +102,7 @@ def test_every_event_class_encodes():
             np.ones(3, complex),
             np.ones(3, complex),
             np.zeros(3),
-        ),  # fmt: skip
+        ),
         StepFinished(_record(), None, ("a", "b"), 1, 10),
         RunWarning("not-settled", "slow", "acc7"),
         FaultRaised("clipping", "acc3 clipped", "acc3", paused=True),

@@ -48,9 +48,20 @@ def _events(path):
 
 @pytest.mark.parametrize(
     "command",
-    [["service"], ["service", "start"], ["service", "stop"], ["service", "status"], ["submit"],
-     ["list"], ["watch"], ["pause"], ["resume"], ["abort"], ["result"]],
-)  # fmt: skip
+    [
+        ["service"],
+        ["service", "start"],
+        ["service", "stop"],
+        ["service", "status"],
+        ["submit"],
+        ["list"],
+        ["watch"],
+        ["pause"],
+        ["resume"],
+        ["abort"],
+        ["result"],
+    ],
+)
 def test_help_of_every_service_command(command):
     r = rig(*command, "--help")
     assert r.returncode == 0 and "usage: rig" in r.stdout
@@ -124,10 +135,15 @@ def test_bad_requests_are_refused_with_reasons(shared_service):
         assert status == 400, data
         assert json.loads(data)["error"]["code"] == code
     with pytest.raises(ServiceError) as info:
-        client.submit({"name": "x", "kind": "stepped-sine", "points": [3, 99],
-                       "excitation": {"levels_n": [1.0]},
-                       "frequencies": {"ranges": [{"start_hz": 20.0, "stop_hz": 21.0,
-                                                   "step_hz": 1.0}]}})  # fmt: skip
+        client.submit(
+            {
+                "name": "x",
+                "kind": "stepped-sine",
+                "points": [3, 99],
+                "excitation": {"levels_n": [1.0]},
+                "frequencies": {"ranges": [{"start_hz": 20.0, "stop_hz": 21.0, "step_hz": 1.0}]},
+            }
+        )
     assert info.value.status == 400 and "99" in str(info.value)
     with pytest.raises(ServiceError) as info:
         client.run("r9999")
@@ -135,6 +151,7 @@ def test_bad_requests_are_refused_with_reasons(shared_service):
     assert client.runs() == before
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(60)
 def test_one_service_per_directory_and_one_owner_per_device(shared_service, bench, tmp_path):
     svc = shared_service
@@ -155,6 +172,62 @@ def test_one_service_per_directory_and_one_owner_per_device(shared_service, benc
 # ------------------------------------------------------------------------ a run, watched
 
 
+def _watched_to_the_end(client, run_a, watchers, outs, n_aborted: int) -> list:
+    """The watchers still connected end by themselves and have every event, in order;
+    returns the run's events as the service holds them."""
+    for w in watchers[1:]:
+        assert w.wait(30) == 1  # the run ended, not successfully
+    held = list(client.events(run_a, follow=False))
+    for out in outs[1:]:
+        events = _events(out)
+        assert [e["seq"] for e in events] == list(range(1, len(events) + 1))
+        assert events == held[: len(events)]
+        assert events[-1]["type"] == "RunState" and events[-1]["data"]["state"] == "aborted"
+        kinds = [e["type"] for e in events]
+        assert kinds.count("StepFinished") == n_aborted
+        for kind in (
+            "RunStarted",
+            "PretestFinished",
+            "ControlIteration",
+            "RunPaused",
+            "RunResumed",
+            "RunFinished",
+        ):
+            assert kind in kinds
+    return held
+
+
+def _resume_completes(svc, client, run_a, run_b, held, n_aborted: int, data) -> None:
+    """Resume completes the file; a late watcher picks up where the first ones stopped."""
+    last_seq = held[-1]["seq"]
+    r = svc.cli("resume", run_a, "--json")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["state"] in ("queued", "running")
+    with client.events(run_a, since=last_seq) as stream:
+        more = list(stream)
+    assert stream.end["state"] == "success" and stream.lost == 0, (
+        stream.end,
+        client.run(run_a)["message"],
+    )
+    assert [e["seq"] for e in more] == list(range(last_seq + 1, last_seq + 1 + len(more)))
+    assert [e["type"] for e in more].count("StepFinished") == PAPER_STEPS - n_aborted
+    record = client.run(run_a)
+    assert record["state"] == "success" and record["attempts"] == 2
+    done = read_measurement(record["path"])
+    assert done.complete and done.exit_status == "success" and done.n_steps == PAPER_STEPS
+    assert sorted(done.plan_index) == list(range(PAPER_STEPS))
+    np.testing.assert_array_equal(done.frequency_hz[:n_aborted], data.frequency_hz)
+
+    result = client.result(run_a)
+    assert result["exists"] and result["summary"]["n_done"] == PAPER_STEPS
+    assert result["summary"]["written_this_run"] == PAPER_STEPS - n_aborted
+    assert result["summary"]["wall_s"] > 0 and result["summary"]["rig_time_s"] > 0
+    r = svc.cli("list", "--json")
+    states = {x["id"]: x["state"] for x in json.loads(r.stdout)}
+    assert states[run_a] == states[run_b] == "success"
+
+
+@pytest.mark.slow
 @pytest.mark.timeout(150)
 def test_paper_run_watched_by_three_paused_aborted_and_resumed(shared_service, procs, tmp_path):
     svc = shared_service
@@ -199,20 +272,7 @@ def test_paper_run_watched_by_three_paused_aborted_and_resumed(shared_service, p
     n_aborted = record["n_done"]
     assert n_paused + 3 <= n_aborted < PAPER_STEPS
 
-    # the watchers still connected end by themselves and have every event, in order
-    for w in watchers[1:]:
-        assert w.wait(30) == 1  # the run ended, not successfully
-    held = list(client.events(run_a, follow=False))
-    for out in outs[1:]:
-        events = _events(out)
-        assert [e["seq"] for e in events] == list(range(1, len(events) + 1))
-        assert events == held[: len(events)]
-        assert events[-1]["type"] == "RunState" and events[-1]["data"]["state"] == "aborted"
-        kinds = [e["type"] for e in events]
-        assert kinds.count("StepFinished") == n_aborted
-        for kind in ("RunStarted", "PretestFinished", "ControlIteration", "RunPaused",
-                     "RunResumed", "RunFinished"):  # fmt: skip
-            assert kind in kinds
+    held = _watched_to_the_end(client, run_a, watchers, outs, n_aborted)
     assert n_killed < len(_events(outs[1]))
 
     # the event's arrays: complex phasors as [re, im] pairs
@@ -232,35 +292,10 @@ def test_paper_run_watched_by_three_paused_aborted_and_resumed(shared_service, p
     assert record_b["state"] == "success" and record_b["n_done"] == 10
     assert record_b["started_s"] >= record["finished_s"]
 
-    # resume completes the file; a late watcher picks up where the first ones stopped
-    last_seq = held[-1]["seq"]
-    r = svc.cli("resume", run_a, "--json")
-    assert r.returncode == 0, r.stderr
-    assert json.loads(r.stdout)["state"] in ("queued", "running")
-    with client.events(run_a, since=last_seq) as stream:
-        more = list(stream)
-    assert stream.end["state"] == "success" and stream.lost == 0, (
-        stream.end,
-        client.run(run_a)["message"],
-    )
-    assert [e["seq"] for e in more] == list(range(last_seq + 1, last_seq + 1 + len(more)))
-    assert [e["type"] for e in more].count("StepFinished") == PAPER_STEPS - n_aborted
-    record = client.run(run_a)
-    assert record["state"] == "success" and record["attempts"] == 2
-    done = read_measurement(record["path"])
-    assert done.complete and done.exit_status == "success" and done.n_steps == PAPER_STEPS
-    assert sorted(done.plan_index) == list(range(PAPER_STEPS))
-    np.testing.assert_array_equal(done.frequency_hz[:n_aborted], data.frequency_hz)
-
-    result = client.result(run_a)
-    assert result["exists"] and result["summary"]["n_done"] == PAPER_STEPS
-    assert result["summary"]["written_this_run"] == PAPER_STEPS - n_aborted
-    assert result["summary"]["wall_s"] > 0 and result["summary"]["rig_time_s"] > 0
-    r = svc.cli("list", "--json")
-    states = {x["id"]: x["state"] for x in json.loads(r.stdout)}
-    assert states[run_a] == states[run_b] == "success"
+    _resume_completes(svc, client, run_a, run_b, held, n_aborted, data)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(60)
 def test_submit_and_watch_from_the_command_line(shared_service):
     r = shared_service.cli("submit", "quick", "--watch", timeout=60)
@@ -282,14 +317,27 @@ def test_submit_and_watch_from_the_command_line(shared_service):
 # ------------------------------------------------------------------------ stop and restart
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(60)
 def test_start_detached_status_and_stop(procs, tmp_path, bench):
     sdir = tmp_path / "svc"
     common = ["--service-dir", sdir]
     r = rig("service", "status", *common)
     assert r.returncode == 3 and "not running" in r.stdout
-    r = rig("service", "start", "--detach", "--backend", "sim", "--setup", bench / "setup.toml",
-            "--port", 0, "--lock-dir", tmp_path / "locks", *common)  # fmt: skip
+    r = rig(
+        "service",
+        "start",
+        "--detach",
+        "--backend",
+        "sim",
+        "--setup",
+        bench / "setup.toml",
+        "--port",
+        0,
+        "--lock-dir",
+        tmp_path / "locks",
+        *common,
+    )
     info = json.loads((sdir / "endpoint.json").read_text())
     procs.pids.append(info["pid"])
     assert r.returncode == 0, r.stderr
@@ -326,14 +374,9 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
-@pytest.mark.timeout(150)
-def test_stop_and_kill_mid_run_then_restart_reports_and_resumes(service_factory):
-    svc = service_factory().start()
-    client = svc.client()
-    run_id = client.submit("paper")
-    wait_for(lambda: client.run(run_id)["n_done"] >= 5, 60, "five steps")
-
-    # a clean stop: the run is ended through the engine and recorded as interrupted
+def _stopped_cleanly(svc, run_id):
+    """A clean stop: the run is ended through the engine and recorded as interrupted; returns
+    its file's data."""
     r = svc.cli("service", "stop", "--json")
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["interrupted"] == run_id
@@ -349,6 +392,20 @@ def test_stop_and_kill_mid_run_then_restart_reports_and_resumes(service_factory)
     n_stopped = data.n_steps
     assert 5 <= n_stopped < PAPER_STEPS and record["n_done"] == n_stopped
     assert list(data.plan_index) == list(range(n_stopped))
+    return data
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(150)
+def test_stop_and_kill_mid_run_then_restart_reports_and_resumes(service_factory):
+    svc = service_factory().start()
+    client = svc.client()
+    run_id = client.submit("paper")
+    wait_for(lambda: client.run(run_id)["n_done"] >= 5, 60, "five steps")
+
+    # a clean stop: the run is ended through the engine and recorded as interrupted
+    data = _stopped_cleanly(svc, run_id)
+    n_stopped = data.n_steps
 
     # restart: the interrupted run is reported; resume continues it
     svc.start()
