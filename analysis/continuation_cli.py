@@ -14,6 +14,7 @@ import csv
 import time
 from fractions import Fraction
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -181,9 +182,9 @@ def write_curve(path: Path, cols: dict[str, np.ndarray], located: list[dict]) ->
         loc_path = path.with_name(f"{path.stem}.located.csv")
         with loc_path.open("w", newline="") as fh:
             keys = ["kind", "output", "frequency_hz", "omega_rad_s", "amplitude_m", "after_point"]
-            w = csv.DictWriter(fh, fieldnames=keys)
-            w.writeheader()
-            w.writerows(located)
+            table = csv.DictWriter(fh, fieldnames=keys)
+            table.writeheader()
+            table.writerows(located)
         return [path, loc_path]
     import h5py
 
@@ -216,7 +217,7 @@ def save_curve(
         ``located`` (the folds and peaks), ``files`` written and ``figure``.
     """
     located = _located(branch, len(labels))
-    result = {"located": located, "files": [], "figure": None}
+    result: dict[str, Any] = {"located": located, "files": [], "figure": None}
     if out is not None:
         result["files"] = [str(p) for p in write_curve(out, _columns(branch, pb, labels), located)]
     if figure is not None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import importlib.util
 import time
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -63,7 +64,7 @@ def _chord_distance(max_angle: float | None) -> tuple[float, int]:
     """Largest distance (plot units) of the solution at each mid frequency from the chord."""
     lin = DirectLinearModel([[1.0]], [[C]], [[1.0]])
     att = Attachment(make_element("cubic_spring", k3=K3), 0, None, "cubic")
-    pb = HarmonicProblem(lin, [att], [0], [0], orders=(1,), n_harmonics=3, n_time=32)
+    pb = HarmonicProblem(lin, [att], [0], [0], orders=(Fraction(1),), n_harmonics=3, n_time=32)
     settings = ContinuationSettings(ds=0.02, ds_max=0.5, stability=False, max_angle=max_angle)
     br = continue_branch(pb, 0.5, 2.0, np.array([F]), settings)
     amp, w, T = np.abs(br.outputs()[:, 0, 0]), br.omega, br.tangents
@@ -83,7 +84,7 @@ def _chord_distance(max_angle: float | None) -> tuple[float, int]:
 def _robust_recovery() -> tuple[int, int]:
     lin = DirectLinearModel([[1.0]], [[0.02]], [[1.0]])
     att = Attachment(make_element("gap_spring", k=20.0, gap=0.5), 0, None, "stop")
-    pb = HarmonicProblem(lin, [att], [0], [0], orders=(1,), n_harmonics=9, n_time=256)
+    pb = HarmonicProblem(lin, [att], [0], [0], orders=(Fraction(1),), n_harmonics=9, n_time=256)
     force = np.array([0.1])
     br = continue_branch(pb, 0.85, 1.1, force, ContinuationSettings(max_angle=0.1, stability=False))
     failed = [p for p in br.points if not solve_point(pb, p.omega, force).converged]

@@ -41,7 +41,7 @@ from rig.commands import (
 from rig.estimation.harmonics import HarmonicEstimate
 from rig.plans import Plan, RandomPlan
 from rig.setup import LabSetup, load_setup
-from rig.signals.multisine import plan_period
+from rig.signals.multisine import PeriodPlan, plan_period
 
 __all__ = ["DryRun", "ModelPlant", "dry_run", "flat_gain"]
 
@@ -92,7 +92,7 @@ class ModelPlant:
         self.seconds = 0.0  # acquisition and ramps so far [s]
         self.step_seconds: list[float] = []  # of each written step [s]
         self._step_start = 0.0
-        self._drive = None
+        self._drive: tuple[PeriodPlan, np.ndarray] | None = None
         self._wave: np.ndarray | None = None
         self._records_gain = 5.0
 
@@ -122,6 +122,8 @@ class ModelPlant:
         return DriveApplied(period, 0, self._drive[1])
 
     def _acquire(self, cmd: Acquire) -> Measurement:
+        if self._drive is None:
+            raise RuntimeError("Acquire before any SetDrive")
         period, drive = self._drive
         periods = cmd.settle_periods + cmd.blocks * cmd.block_periods
         self.seconds += periods * period.samples_per_period / self.ctx.sample_rate_hz

@@ -417,7 +417,8 @@ class RunEngine:
                 f"limit {self._drive_limit_v:g} V",
             )
         steady = self._write(wave, cmd.ramp_s)
-        self._output = _Output(wave, wave.size, steady, tuple(cmd.band_hz))
+        lo_hz, hi_hz = cmd.band_hz
+        self._output = _Output(wave, wave.size, steady, (float(lo_hz), float(hi_hz)))
         return WaveformApplied(wave.size, steady, peak)
 
     def _write(self, wave: np.ndarray, ramp_s: float) -> int:

@@ -199,7 +199,7 @@ class SteppedSinePlan:
 
     def steps(self) -> tuple[PlannedStep, ...]:
         """Every step in the order it is run: for each level, each sweep, each frequency."""
-        out = []
+        out: list[PlannedStep] = []
         for li, level in enumerate(self.excitation.levels_n):
             for sign, freqs in self.frequencies.sweeps():
                 for j, f in enumerate(freqs):

@@ -271,7 +271,7 @@ def _summary_markdown(s: dict, title: str, reference: str | Path | None, out: Pa
         lines += [
             "",
             f"{sum(inside)} of {len(inside)} truth values lie inside their stated 95 % "
-            f"interval ({rel(reference)}: the simulated rig's truth, never read by the "
+            f"interval ({rel(str(reference))}: the simulated rig's truth, never read by the "
             "calibration).",
         ]
     lines += _planning_lines(s["planning"])

@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import ast
+import functools
 import sys
 from pathlib import Path
 
@@ -23,8 +24,14 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@functools.cache
+def _tree(path: Path) -> ast.Module:
+    """The parsed file, once per session (every test walks the same files)."""
+    return ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+
+
 def _imports(path: Path) -> list[tuple[str, int]]:
-    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    tree = _tree(path)
     out = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
@@ -86,7 +93,7 @@ def test_nidaqmx_only_in_the_ni_driver():
 
 def _function_imports(path: Path) -> set[int]:
     """Lines of the imports made inside functions (run only when the function is called)."""
-    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    tree = _tree(path)
     return {
         node.lineno
         for fn in ast.walk(tree)
@@ -181,6 +188,7 @@ def _type_checking_lines(tree: ast.Module) -> set[int]:
     }
 
 
+@functools.cache
 def _import_graph() -> dict[str, set[str]]:
     """Module -> the project's modules it imports, at module level or inside functions;
     ``from package import name`` counts as importing the submodule when ``name`` is one, else
@@ -194,7 +202,7 @@ def _import_graph() -> dict[str, set[str]]:
 
     graph: dict[str, set[str]] = {}
     for mod, path in files.items():
-        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        tree = _tree(path)
         skip = _type_checking_lines(tree)
         package = mod if path.name == "__init__.py" else mod.rpartition(".")[0]
         targets = set()

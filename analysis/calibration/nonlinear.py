@@ -418,6 +418,10 @@ class ObjectiveSpec:
     def build(self) -> FRFObjective:
         model = Model.from_toml_text(self.model_toml, source="<calibration model>")
         data = read_measurement(self.data_path)
+        if not isinstance(data, SteppedSineData):
+            raise ValueError(
+                f"{self.data_path}: a stepped-sine run is needed (a random test given)"
+            )
         settings = CalibrationSettings(
             channels=self.channels,
             n_harmonics=self.n_harmonics,

@@ -322,7 +322,9 @@ def propagate_held(
     return Propagation(gain=gain, cov=cov)
 
 
-def noise_scale(chi2_per_dof: float, fold_ratio: Sequence[float] | None = None) -> np.ndarray:
+def noise_scale(
+    chi2_per_dof: float, fold_ratio: Sequence[float] | np.ndarray | None = None
+) -> np.ndarray:
     """Per parameter, the factor on the noise-only standard deviation: the Birge ratio
     ``sqrt(chi2/dof)`` where the misfit exceeds the noise, or the folds' scatter over the
     noise-only prediction (cross-validation's ``std_ratio``) where that is larger: the

@@ -50,7 +50,7 @@ class OneSidedStop(NonlinearElement):
     @property
     def side(self) -> int:
         """``-1`` (stop below) or ``+1`` (stop above)."""
-        return self.options["side"]
+        return int(self.options["side"])  # type: ignore[call-overload]
 
     def _validate(self) -> None:
         side = self._option_number("side")
@@ -99,7 +99,7 @@ class GapSpring(OneSidedStop):
     description = "one-sided linear stop: f = k(-u - gap) for u < -gap (side -1) or mirror"
 
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
-        f, df_du, df_dk, df_dgap = _linear_stop(u, *self._p, self.side)
+        f, df_du, df_dk, df_dgap = _linear_stop(u, self._p[0], self._p[1], self.side)
         df_dp = np.stack([df_dk, df_dgap]) if want_params else None
         return ElementEval(f, df_du, np.zeros_like(u), df_dp)
 
@@ -128,7 +128,7 @@ class TwoSidedGap(NonlinearElement):
     description = "dead-zone spring: f = -k(u - gap) for u > gap, -k(u + gap) for u < -gap"
 
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
-        upper, lower = (_linear_stop(u, *self._p, side) for side in (1, -1))
+        upper, lower = (_linear_stop(u, self._p[0], self._p[1], side) for side in (1, -1))
         f, df_du, df_dk, df_dgap = (a + b for a, b in zip(upper, lower, strict=True))
         df_dp = np.stack([df_dk, df_dgap]) if want_params else None
         return ElementEval(f, df_du, np.zeros_like(u), df_dp)

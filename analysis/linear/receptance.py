@@ -28,7 +28,10 @@ __all__ = ["DirectLinearModel", "LinearModel", "ModalLinearModel", "ReceptanceBl
 class ReceptanceBlock(Protocol):
     """A receptance sub-matrix as a function of angular frequency."""
 
-    shape: tuple[int, int]
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(n_rows, n_cols)``."""
+        ...
 
     def __call__(self, omega: np.ndarray) -> np.ndarray:
         """``H(omega)``, shape (n_omega, n_rows, n_cols), m/N."""

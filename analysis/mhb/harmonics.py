@@ -62,6 +62,7 @@ class HarmonicBasis:
     PP: np.ndarray = field(init=False, repr=False, compare=False)
     k: np.ndarray = field(init=False, repr=False, compare=False)
     jump_weights: np.ndarray = field(init=False, repr=False, compare=False)
+    _tau: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         H, N = self.n_harmonics, self.n_time

@@ -21,12 +21,12 @@ _DERIVATIVES = {"displacement": 0, "velocity": 1, "acceleration": 2}
 
 
 def _dofs(problem: HarmonicProblem, dofs: int | Sequence[int]) -> list[int]:
-    dofs = [dofs] if np.isscalar(dofs) else list(dofs)
+    items: list[object] = [dofs] if np.isscalar(dofs) else list(dofs)  # type: ignore[arg-type]
     n = problem.linear.n_dof
-    bad = [d for d in dofs if not (isinstance(d, int | np.integer) and 0 <= d < n)]
-    if bad or not dofs:
-        raise ValueError(f"dofs: expected DOF indices in 0..{n - 1}, got {bad or dofs!r}")
-    return [int(d) for d in dofs]
+    bad = [d for d in items if not (isinstance(d, int | np.integer) and 0 <= d < n)]
+    if bad or not items:
+        raise ValueError(f"dofs: expected DOF indices in 0..{n - 1}, got {bad or items!r}")
+    return [int(d) for d in items]  # type: ignore[call-overload]
 
 
 def dof_phasors(problem: HarmonicProblem, point, dofs: int | Sequence[int]) -> np.ndarray:

@@ -69,6 +69,7 @@ def hertz():
     return _example("two_dof_hertz").curve()
 
 
+@pytest.mark.slow
 def test_two_dof_hertz_curve_folds_at_the_stop(hertz):
     pb, branch = hertz
     assert branch.message == "reached the end frequency"
@@ -116,6 +117,7 @@ def test_cantilever_modes_against_euler_bernoulli():
     assert np.all(f / exact - 1 < [1e-5, 2e-4, 1e-3])
 
 
+@pytest.mark.slow
 def test_cantilever_linear_limit_is_the_direct_receptance():
     ex = _example("cantilever_tip_contact")
     pb, branch = ex.curve(values={"gap": 1.0})  # the stop never reached

@@ -62,6 +62,7 @@ def test_identified_damping_in_the_model(which: str, tol: float, request) -> Non
     assert result.model.damping.default_zeta == load_model().damping.default_zeta
 
 
+@pytest.mark.slow  # the noisy calibration fixture takes 14 s
 def test_split_and_validation_improves(noisy_result) -> None:
     r = noisy_result
     assert r.calibration_points == (1, 2, 3, 4, 5, 6, 7, 8, 11)
@@ -75,6 +76,7 @@ def test_split_and_validation_improves(noisy_result) -> None:
     assert after["measured"]["validation"] < 2 * np.log10(1.02)
 
 
+@pytest.mark.slow  # the noisy calibration fixture takes 14 s
 def test_covariance_and_correlation(noisy_result) -> None:
     r = noisy_result
     n = len(r.names)
@@ -109,6 +111,7 @@ def test_model_file_written_new_and_reloads(clean_result, tmp_path: Path) -> Non
     assert doc["damping_per_mode"]["5"] == pytest.approx(TRUE_ZETA[5], rel=0.01)
 
 
+@pytest.mark.slow  # the noisy calibration fixture takes 14 s
 def test_a_test_that_determines_everything_says_nothing(noisy_result) -> None:
     assert noisy_result.undetermined() == {}
     assert noisy_result.unidentified_modes == []
