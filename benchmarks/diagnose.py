@@ -81,7 +81,10 @@ TRUE_EFFECTS = {
     "mass_loading": ("mass", "point 6", None),
     # Located effects: one spring of the mounts' group, a beam point no sensor is at, a stop
     # between the tip and the frame (between two nodes: at, to), a damper whose neighbours
-    # tie with it in the paper's band (the second bending mode separates them: its truth file).
+    # tie with it in the paper's band (the second bending mode separates them: its truth file;
+    # the one mount likewise ties with the group, which the suspension modes separate). Names
+    # of places the candidates lack are proposals: "spring NAME" for one spring of the model,
+    # "point N to NODE DIRECTION" for an element between a point's DOF and another.
     "one_mount_hardens": ("cubic_spring", "spring mount_right_y", None),
     "stop_above_p5": ("hertz_contact", "point 5", 1),
     "tip_to_frame_stop": ("hertz_contact", "point 7 to right_top y", 1),
