@@ -2,20 +2,68 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from analysis.model import ModelFileError, load_model
-from sim_backend.sizing import PaperTest, truth_misfit
+from sim_backend.sizing import PaperTest, second_mode_frequencies, truth_misfit
 from sim_backend.truth import TRUTH_DIR, list_truths, load_truth
 
 HIDDEN = ("hardening_mounts", "clamp_friction", "two_sided_stop", "damper_p5", "mass_loading")
+# Hidden effects at the locations the diagnosis is to reach: one spring of a group, a beam
+# point no sensor of the paper's test is at, an element between two nodes, a tie of points
+# that a second test separates.
+LOCATED = ("one_mount_hardens", "stop_above_p5", "tip_to_frame_stop", "damper_p4")
 # A hidden effect outside the analysis library (a Jenkins element in the clamp).
 OUTSIDE_LIBRARY = ("hysteretic_joint",)
+
+# The paper's bump stop, in every truth: (kind, at, to, parameter values, options).
+BUMP_STOP = ("hertz_contact", ("tip", "y"), None, {"k_c": 4.51e5, "gap": 0.60e-3, "v": 25.21},
+             {"side": -1})  # fmt: skip
+# Each truth's nonlinear elements besides the bump stop, as its header states them.
+HIDDEN_ELEMENTS = {
+    "reference": {},
+    "hardening_mounts": {
+        f"mount_{c}_{d}_hardening": ("cubic_spring", (f"{c}_bottom", d), None, {"k3": 1.5e12}, {})
+        for c in ("left", "right")
+        for d in ("x", "y")
+    },
+    "clamp_friction": {
+        "clamp_friction": ("coulomb_friction", ("beam_root", "rz"), ("left_top", "rz"),
+                           {"f_slip": 3.0}, {"v_reg": 0.01}),
+    },
+    "two_sided_stop": {
+        "upper_stop": ("hertz_contact", ("tip", "y"), None,
+                       {"k_c": 4.51e5, "gap": 1.2e-3, "v": 25.21}, {"side": 1}),
+    },
+    "damper_p5": {"damper_p5": ("quadratic_damper", ("p5", "y"), None, {"c2": 6.0}, {})},
+    "mass_loading": {},
+    "hysteretic_joint": {
+        "clamp_microslip": ("jenkins", ("beam_root", "rz"), ("left_top", "rz"),
+                            {"k_t": 1e5, "f_s": 1.5}, {}),
+    },
+    "one_mount_hardens": {
+        "mount_right_y_hardening": ("cubic_spring", ("right_bottom", "y"), None, {"k3": 1e12}, {}),
+    },
+    "stop_above_p5": {
+        "stop_above_p5": ("hertz_contact", ("p5", "y"), None,
+                          {"k_c": 4.51e5, "gap": 1.8e-3, "v": 25.21}, {"side": 1}),
+    },
+    "tip_to_frame_stop": {
+        "tip_to_frame_stop": ("hertz_contact", ("tip", "y"), ("right_top", "y"),
+                              {"k_c": 4.51e5, "gap": 2.8e-3, "v": 25.21}, {"side": 1}),
+    },
+    "damper_p4": {"damper_p4": ("quadratic_damper", ("p4", "y"), None, {"c2": 10.0}, {})},
+}  # fmt: skip
+# Linear hidden parts: the clamp's rotational spring [N m/rad]; the extra mass at point 6 [kg].
+CLAMP_RZ = {"clamp_friction": 50000.0, "hysteretic_joint": 30000.0}
+EXTRA_MASS = {"mass_loading": ("p6", 0.06)}
 
 
 def test_shipped_truths_are_listed_and_load() -> None:
     names = list_truths()
-    assert set(names) == {"reference", *HIDDEN, *OUTSIDE_LIBRARY}
+    assert set(names) == {"reference", *HIDDEN, *LOCATED, *OUTSIDE_LIBRARY}
+    assert set(names) == set(HIDDEN_ELEMENTS)
     for name in names:
         truth = load_truth(name)
         assert truth.name == name
@@ -73,3 +121,112 @@ def test_hidden_effect_misfits_the_reference_far_beyond_the_noise(name: str) -> 
     # stepped sine of the paper at 2 and 4 N (the full 2/4/6/8 N sizing is in the report)
     misfit = truth_misfit(name, test=PaperTest(levels_n=(2.0, 4.0)))
     assert misfit.rms_sigma > 10.0, misfit
+
+
+def _elements(truth) -> dict[str, tuple]:
+    out = {}
+    for spec, element in truth.model.build_elements():
+        to = None if spec.to is None else (spec.to.node, spec.to.direction)
+        out[spec.name] = (spec.kind, (spec.at.node, spec.at.direction), to, element.params,
+                          element.options)  # fmt: skip
+    return out
+
+
+def _same(found: tuple, expected: tuple) -> bool:
+    kind, at, to, params, options = expected
+    return (
+        found[:3] == (kind, at, to)
+        and found[3].keys() == params.keys()
+        and all(found[3][k] == pytest.approx(v, rel=1e-12) for k, v in params.items())
+        and all(found[4].get(k) == v for k, v in options.items())
+    )
+
+
+@pytest.mark.parametrize("name", sorted(HIDDEN_ELEMENTS))
+def test_each_truth_hides_the_elements_its_header_states_at_their_dofs(name: str) -> None:
+    truth = load_truth(name)
+    elements = _elements(truth)
+    assert _same(elements.pop("bump_stop"), BUMP_STOP), "the paper's stop is unchanged"
+    expected = HIDDEN_ELEMENTS[name]
+    assert elements.keys() == expected.keys()
+    for key, found in elements.items():
+        assert _same(found, expected[key]), (key, found)
+    # every element names DOFs of the structure (assembly raises on an unknown node)
+    asm = truth.model.assemble()
+    for spec, _ in truth.model.build_elements():
+        asm.dof_index(spec.at.node, spec.at.direction)
+    (clamp,) = truth.model.frame.joints
+    rz = clamp.connection("rz")
+    if name in CLAMP_RZ:
+        assert truth.model.values()[rz] == CLAMP_RZ[name]
+    else:
+        assert rz == "rigid"
+    masses = {(m.node, m.m_kg) for m in truth.model.frame.masses if m.name != "clamped_length"}
+    assert masses == ({EXTRA_MASS[name]} if name in EXTRA_MASS else set())
+    header = TRUTH_DIR.joinpath(f"{name}.toml").read_text().split("\n[", 1)[0]
+    assert ("# Hidden effect" in header) == (name != "reference")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", LOCATED)
+def test_located_effects_misfit_the_papers_test_by_8_to_30_times_the_noise(name: str) -> None:
+    # the sizing the issue asks of them (values in each truth's header: 13.3 to 22.9)
+    misfit = truth_misfit(name)
+    assert 8.0 <= misfit.rms_sigma <= 30.0, misfit
+
+
+def _moved_damper(tmp_path, point: int, c2: float):
+    """damper_p4 with its damper moved to ``point`` at ``c2``: a look-alike."""
+    text = TRUTH_DIR.joinpath("damper_p4.toml").read_text()
+    old_at, old_value = "at = { point = 4 }", "[parameters.c2_p4]\nvalue = 10.0\n"
+    assert old_at in text and old_value in text
+    text = text.replace(old_at, f"at = {{ point = {point} }}")
+    text = text.replace(old_value, f"[parameters.c2_p4]\nvalue = {c2}\n")
+    path = tmp_path / f"damper_at_{point}.toml"
+    path.write_text(text)
+    return load_truth(path)
+
+
+@pytest.mark.slow
+def test_damper_p4_ties_with_its_neighbours_in_the_papers_band_not_in_the_second_mode(
+    tmp_path,
+) -> None:
+    # c2 scaled by (phi_4 / phi_j)^3 of the first bending mode (header of damper_p4): the
+    # look-alikes at points 3 and 5 misfit the truth by 0.32 and 0.15 x noise in the paper's
+    # test and by 59 and 12 around the second mode, where point 5 is on the node. Tolerances:
+    # under 1 in the paper's band (the effect itself is 16.9 there), over 5 in the second.
+    truth = load_truth("damper_p4")
+    band = second_mode_frequencies()
+    for point, c2 in ((3, 46.0), (5, 3.45)):
+        look_alike = _moved_damper(tmp_path, point, c2)
+        paper = truth_misfit(look_alike, reference=truth)
+        second = truth_misfit(look_alike, reference=truth, frequencies_hz=band)
+        assert paper.rms_sigma < 1.0, (point, paper)
+        assert second.rms_sigma > 5.0, (point, second)
+    # and the second band sees the damper itself, so the separation is not the band's noise
+    assert truth_misfit(truth, frequencies_hz=band).rms_sigma > 5.0
+
+
+@pytest.mark.slow
+def test_one_mount_ties_with_the_group_in_the_papers_band_not_in_the_suspension_modes(
+    tmp_path,
+) -> None:
+    # The same cubic under all four mount springs: in the paper's band the other three hardly
+    # move (0.01 x noise measured); over the frame's suspension modes (9-17 Hz) the left corner
+    # moves as much as the right (52 x noise measured). Tolerances: under 1 and over 10.
+    text = TRUTH_DIR.joinpath("one_mount_hardens.toml").read_text()
+    one = 'at = { node = "right_bottom", direction = "y" }\nparams = { k3 = "k3_mount_right_y" }\n'
+    assert one in text
+    group = "".join(
+        f'\n[[nonlinear]]\nname = "mount_{c}_{d}_hardening"\nkind = "cubic_spring"\n'
+        f'at = {{ node = "{c}_bottom", direction = "{d}" }}\n'
+        'params = { k3 = "k3_mount_right_y" }\n'
+        for c, d in (("left", "x"), ("left", "y"), ("right", "x"))
+    )
+    path = tmp_path / "all_mounts_harden.toml"
+    path.write_text(text.replace(one, one + group))
+    look_alike, truth = load_truth(path), load_truth("one_mount_hardens")
+    assert len(look_alike.model.nonlinear) == len(truth.model.nonlinear) + 3
+    suspension = np.round(np.arange(9.0, 17.01, 0.25), 6)
+    assert truth_misfit(look_alike, reference=truth).rms_sigma < 1.0
+    assert truth_misfit(look_alike, reference=truth, frequencies_hz=suspension).rms_sigma > 10.0
