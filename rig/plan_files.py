@@ -26,7 +26,7 @@ from rig.plan_settings import (
     RandomExcitation,
     ResponseLimit,
 )
-from rig.plans import Plan, RandomPlan, SteppedSinePlan
+from rig.plan_types import Plan, RandomPlan, SteppedSinePlan
 from rig.signals.multisine import as_orders
 from rig.tomlconfig import ConfigError, Table, read_toml
 

@@ -163,9 +163,6 @@ KNOWN_IMPORT_CYCLES: set[tuple[str, ...]] = {
         "analysis.elements.gaps",
         "analysis.elements.polynomial",
     ),
-    # rig/plans.py re-exports the plan-file functions at its end; rig/plan_files.py builds
-    # the plan classes of rig/plans.py
-    ("rig.plan_files", "rig.plans"),
 }
 
 
