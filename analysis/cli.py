@@ -29,7 +29,13 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.logs import add_debug_option, configure_logging, note_inputs, summarise_repeats
+from analysis.logs import (
+    add_debug_option,
+    configure_logging,
+    note_inputs,
+    parse_assignments,
+    summarise_repeats,
+)
 from analysis.mhb.continuation import continue_branch
 from analysis.mhb.sweep import solve_steps
 from analysis.model import load_model
@@ -41,13 +47,7 @@ log = logging.getLogger("analysis")
 
 def _model(args):
     model = load_model(args.model)
-    values = {}
-    for item in args.set or []:
-        name, _, val = item.partition("=")
-        try:
-            values[name.strip()] = float(val)
-        except ValueError:
-            raise SystemExit(f"--set {item!r}: expected NAME=NUMBER") from None
+    values = parse_assignments(args.set)
     if getattr(args, "paper", False):
         values = {**PAPER_CALIBRATED, **values}
     return model.with_values(values) if values else model

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from analysis.logs import parse_assignments
 from analysis.mhb.continuation import Branch, ContinuationSettings, continue_branch
 from analysis.model import Model, load_model
 from analysis.paper import PAPER_CALIBRATED
@@ -87,12 +88,7 @@ def _model(args) -> Model:
     path = args.model_file or args.model
     model = load_model(path)
     values = {**PAPER_CALIBRATED} if args.paper else {}
-    for item in args.set or []:
-        name, _, val = item.partition("=")
-        try:
-            values[name.strip()] = float(val)
-        except ValueError:
-            raise SystemExit(f"--set {item!r}: expected NAME=NUMBER") from None
+    values |= parse_assignments(args.set)
     if path is not None and args.drive is None:
         raise SystemExit("--drive: required with a model file (a point, node/direction or dof:N)")
     return model.with_values(values) if values else model

@@ -34,6 +34,7 @@ __all__ = [
     "add_debug_option",
     "configure_logging",
     "note_inputs",
+    "parse_assignments",
     "summarise_repeats",
 ]
 
@@ -226,3 +227,16 @@ def note_inputs(args, logger: logging.Logger | None = None) -> list[str]:
     for note in notes:
         (logger or log).warning("note: %s", note)
     return notes
+
+
+def parse_assignments(items, option: str = "--set") -> dict[str, float]:
+    """``NAME=NUMBER`` command-line items as a mapping; a malformed one ends the command with
+    a message naming it (``--set 'gap=x': expected NAME=NUMBER``)."""
+    values = {}
+    for item in items or []:
+        name, _, val = item.partition("=")
+        try:
+            values[name.strip()] = float(val)
+        except ValueError:
+            raise SystemExit(f"{option} {item!r}: expected NAME=NUMBER") from None
+    return values

@@ -100,6 +100,24 @@ HELD_ORDERS = 8
 POSTS = (8, 9, 12, 13)  # points measuring x (the posts' bending direction)
 
 
+def _accelerometer(point: int, direction: str, mass_kg: float) -> ChannelInfo:
+    """The channel table's row of the 100 mV/g accelerometer at ``point`` (the drive point's
+    is the impedance head's acceleration half)."""
+    role = "drive-acceleration" if point == 3 else "response"
+    return ChannelInfo(
+        f"acc{point}",
+        point,
+        direction,
+        "acceleration",
+        "m/s^2",
+        100.0,
+        "mV/g",
+        role,
+        mass_kg,
+        f"A{point}",
+    )
+
+
 # -- runs on the simulated rig ---------------------------------------------------------------
 def cache_dir() -> Path:
     """Where the simulated runs are kept."""
@@ -288,20 +306,7 @@ def simulate_linear_test(
     rows = []
     for p in range(1, 14):
         direction = "x" if p in POSTS else "y"
-        chans.append(
-            ChannelInfo(
-                f"acc{p}",
-                p,
-                direction,
-                "acceleration",
-                "m/s^2",
-                100.0,
-                "mV/g",
-                "drive-acceleration" if p == 3 else "response",
-                masses[p],
-                f"A{p}",
-            )
-        )
+        chans.append(_accelerometer(p, direction, masses[p]))
         rows.append(asm.point_dof(p, direction))
     e = np.zeros(asm.n_dofs)
     e[drive] = 1.0
@@ -368,21 +373,7 @@ def simulate_stepped_sine(
         n_time=n_time,
     )
     chans = [ChannelInfo("force3", 3, "y", "force", "N", 22.5, "mV/N", "drive-force", 0.0, "IH")]
-    chans += [
-        ChannelInfo(
-            f"acc{p}",
-            p,
-            "y",
-            "acceleration",
-            "m/s^2",
-            100.0,
-            "mV/g",
-            "drive-acceleration" if p == 3 else "response",
-            masses[p],
-            f"A{p}",
-        )
-        for p in points
-    ]
+    chans += [_accelerometer(p, "y", masses[p]) for p in points]
     rng = np.random.default_rng(seed)
     targets = np.array([[lv, 0.02 * lv, 0.02 * lv] for lv in levels_n], complex)
     writer = create_stepped_sine(
