@@ -5,7 +5,7 @@ truth with an effect the model lacks), the rig's own commands make the random te
 paper's stepped sine (``rig linear``, ``rig run paper``: made once and cached, keyed by the truth
 file, the plans, the seed and the code that makes the data, :func:`make_runs`); then the
 analysis part of ``rig workflow`` runs on them exactly as the workflow calls it
-(:func:`rig.workflow.analyse_runs`: linear calibration, planning, nonlinear calibration,
+(:func:`rig.cli.workflow.analyse_runs`: linear calibration, planning, nonlinear calibration,
 cross-validation, validation, report and summary). A run that fails counts as a miss.
 
 Judged pairs: (seed, parameter) for k_c, gap, v_c and every linear parameter (a held one with
@@ -130,7 +130,7 @@ def _reference(truth: str, seed: int, path: Path) -> Path:
 
 def analyse(case: tuple[str, int], runs, folder: Path) -> dict:
     """The workflow's analysis of one case's runs; the figures of its summary."""
-    from rig.workflow import analyse_runs
+    from rig.cli.workflow import analyse_runs
 
     truth, seed = case
     out = folder / f"{truth}-{seed}"

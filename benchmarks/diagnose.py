@@ -140,7 +140,7 @@ def benchmark_plan(quick: bool = False, blocks: int | None = None):
     """The paper's plan with the force's orders up to :data:`HELD_ORDERS` held at zero and
     ``blocks`` periods recorded per step (None: the plan's 48; ``quick``: 2, 5 and 8 N, 0.2 Hz
     steps in 24-28 Hz)."""
-    from rig.plans import load_plan
+    from rig.config.plans import load_plan
 
     plan = load_plan("paper")
     ex = plan.excitation
@@ -189,7 +189,8 @@ RUN_CODE = (
 
 
 #: Command-line front ends and stages that run commands but make no data themselves.
-FRONT_ENDS = ("gui", "service", "cli.py", "cli_service.py", "workflow.py", "export_uff.py")
+#: (file names of rig/cli/ and folders of rig/)
+FRONT_ENDS = ("gui", "service", "main.py", "service.py", "workflow.py", "export")
 
 
 @functools.cache
@@ -217,8 +218,8 @@ def stepped_run(truth: str, folder: Path, *, quick: bool = False, seed: int = 0)
     seconds : float
         Wall time spent making it (0 when taken from the cache).
     """
-    from rig.runner import TestRun, open_rig
-    from rig.setup import load_setup
+    from rig.config.setup import load_setup
+    from rig.run.session import TestRun, open_rig
 
     plan = benchmark_plan(quick, record_blocks())
     text = (TRUTH_DIR / f"{truth}.toml").read_text()

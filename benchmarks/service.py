@@ -34,8 +34,8 @@ from pathlib import Path
 
 import tomli_w
 
+from rig.config.setup import load_setup
 from rig.service.client import FINAL_STATES, ServiceClient
-from rig.setup import load_setup
 
 ENV_DROP = ("RIG_SERVICE_DIR", "RIG_SERVICE_URL", "RIG_SERVICE_TOKEN", "RIG_LOCK_DIR")
 

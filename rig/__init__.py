@@ -1,10 +1,17 @@
-"""The lab side: drive signals, harmonic estimation, force control, DAQ backends, and the runs.
+"""The lab side: what a run is told, how it runs, and the front ends that start it.
 
-Data flow of a run (``python -m rig run``): a lab setup (:mod:`rig.setup`) and a test plan
-(:mod:`rig.plans`) become a procedure of commands (:mod:`rig.run_stepped`,
-:mod:`rig.run_random`, :mod:`rig.pretest`, :mod:`rig.commands`) that the engine
-(:mod:`rig.engine`) executes on a DAQ backend (:mod:`rig.backends`), checking every block
-(:mod:`rig.safety`), publishing events (:mod:`rig.events`) and writing each completed step to
-the measurement file; :mod:`rig.runner` ties this to the device lock (:mod:`rig.lock`), the
-amplifier (:mod:`rig.instruments`) and the file; :mod:`rig.export_uff` exports FRFs.
+The folders follow a run's data flow (``python -m rig run``):
+
+- :mod:`rig.config`: a lab setup and a test plan, read from TOML;
+- :mod:`rig.procedures`: the plan becomes a procedure of commands (stepped sine with its force
+  control, random test, pretest checks);
+- :mod:`rig.signals` and :mod:`rig.estimation`: multi-sine and random synthesis, harmonic
+  estimation, the settling test and FRFs;
+- :mod:`rig.run`: the engine executes the commands on a DAQ backend (:mod:`rig.backends`),
+  checks every block, publishes events and writes each completed step to the measurement file;
+  the run session ties this to the device lock, the amplifier (:mod:`rig.instruments`) and the
+  file;
+- :mod:`rig.cli`, :mod:`rig.service`, :mod:`rig.gui`: the command line (and the whole
+  workflow), the acquisition service and the lab GUI, which all start runs the same way;
+- :mod:`rig.export`: measurement files in other tools' formats.
 """

@@ -4,7 +4,7 @@
   analysis/report.
 - sim_backend imports analysis but not rig (it satisfies rig's protocol by shape).
 - rig imports nidaqmx only inside its NI driver modules; nothing imports rig.gui but the
-  ``gui`` command of rig/cli.py, inside its function.
+  ``gui`` command of rig/cli/main.py, inside its function.
 - no package imports benchmarks.
 - the acquisition service's client side (rig/service: client, auth, directory, launch) needs the
   standard library only, so the GUI and scripts stay light; aiohttp only in its server.
@@ -104,9 +104,9 @@ def _function_imports(path: Path) -> set[int]:
 
 
 def test_nothing_imports_the_gui():
-    """rig.gui is a leaf: only the ``gui`` command of rig/cli.py imports it, inside the
+    """rig.gui is a leaf: only the ``gui`` command of rig/cli/main.py imports it, inside the
     command's function (so the command line works without Qt)."""
-    cli = ROOT / "rig" / "cli.py"
+    cli = ROOT / "rig" / "cli" / "main.py"
     bad = [
         f"{f.relative_to(ROOT)}:{line}"
         for pkg in ("analysis", "rig", "sim_backend", "benchmarks")
@@ -281,3 +281,59 @@ def test_no_new_import_cycle():
     assert not gone, (
         f"cycles no longer there (remove them from KNOWN_IMPORT_CYCLES): {sorted(gone)}"
     )
+
+
+# rig's stages, lowest first: a module may import its own stage's modules and lower stages'
+# only (docs/architecture.md). The engine layer of rig/run (commands, events, faults, engine,
+# acquisition, safety, lock) is below the procedures, which speak its commands; the session and
+# the dry run, which turn a plan into a procedure and run it, are above them.
+RIG_STAGES: tuple[tuple[str, ...], ...] = (
+    ("rig.signals", "rig.backends", "rig.instruments"),
+    ("rig.estimation", "rig.config"),
+    (
+        "rig.run.commands",
+        "rig.run.events",
+        "rig.run.faults",
+        "rig.run.engine",
+        "rig.run.acquisition",
+        "rig.run.safety",
+        "rig.run.lock",
+    ),
+    ("rig.procedures",),
+    ("rig.run.session", "rig.run.dry_run", "rig.run"),
+    ("rig.export", "rig.service", "rig.cli", "rig.gui", "rig", "rig.__main__"),
+)
+
+
+def _rig_stage(module: str) -> int | None:
+    """Index of the stage that holds ``module`` (its longest matching prefix), None outside rig."""
+    best, rank = "", None
+    for i, stage in enumerate(RIG_STAGES):
+        for prefix in stage:
+            hit = module == prefix or module.startswith(prefix + ".")
+            if hit and len(prefix) > len(best):
+                best, rank = prefix, i
+    return rank
+
+
+def test_every_rig_module_has_a_stage():
+    missing = [m for m in _import_graph() if m.startswith("rig") and _rig_stage(m) is None]
+    assert not missing, f"rig modules outside every stage of RIG_STAGES: {missing}"
+
+
+def test_rig_stages_import_downwards():
+    wrong = [
+        f"{mod} (stage {_rig_stage(mod)}) imports {dep} (stage {_rig_stage(dep)})"
+        for mod, deps in sorted(_import_graph().items())
+        if mod.startswith("rig")
+        for dep in sorted(deps)
+        if dep.startswith("rig") and (_rig_stage(dep) or 0) > (_rig_stage(mod) or 0)
+    ]
+    assert not wrong, "\n".join(wrong)
+
+
+def test_the_stage_rule_catches_an_upward_import():
+    # the engine layer below the procedures, the procedures below the session
+    assert _rig_stage("rig.run.engine") < _rig_stage("rig.procedures.stepped_sine")
+    assert _rig_stage("rig.procedures.stepped_sine") < _rig_stage("rig.run.session")
+    assert _rig_stage("rig.config.plans") < _rig_stage("rig.run.commands")

@@ -2,7 +2,7 @@
 
 Every mutated input must either load (and then round-trip) or be refused with the project's
 own error naming the file: a :class:`~analysis.model_file.ModelFileError` for a model file, a
-:class:`~rig.tomlconfig.ConfigError` for a plan or a setup, a
+:class:`~rig.config.tomlconfig.ConfigError` for a plan or a setup, a
 :class:`~analysis.measurement_file.MeasurementFileError` for a measurement file. Never a
 traceback of another type, never a NaN or an infinity accepted in silence.
 """
@@ -24,9 +24,9 @@ import tomli_w
 
 from analysis.measurement_file import MeasurementFileError, read_measurement
 from analysis.model import Model, ModelFileError
-from rig.plans import builtin_plans, plan_from_dict
-from rig.setup import builtin_setups, setup_from_dict
-from rig.tomlconfig import ConfigError
+from rig.config.plans import builtin_plans, plan_from_dict
+from rig.config.setup import builtin_setups, setup_from_dict
+from rig.config.tomlconfig import ConfigError
 from tests.analysis import measurement_samples as ms
 
 N_CASES = 1000

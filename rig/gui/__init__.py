@@ -3,8 +3,8 @@ workbench (measured against model FRFs, residual maps, diagnosis, recalibration,
 
 ``python -m rig gui`` starts it (:func:`rig.gui.app.main`); by default it runs plans on the
 simulated rig in this process. The GUI is a leaf of the package tree: nothing imports it. It
-runs the same engine, plans, setups and files as the command line (:mod:`rig.runner`,
-:mod:`rig.plans`, :mod:`rig.setup`) and the analysis through its public API
+runs the same engine, plans, setups and files as the command line (:mod:`rig.run.session`,
+:mod:`rig.config.plans`, :mod:`rig.config.setup`) and the analysis through its public API
 (:mod:`analysis.diagnosis`, :mod:`analysis.planning`, :mod:`analysis.calibration.results`).
 
 Modules

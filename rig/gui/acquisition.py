@@ -15,13 +15,13 @@ from pathlib import Path
 
 from PySide6 import QtCore, QtWidgets
 
-from rig.events import Event, PretestFinished, RunFinished, RunPaused, RunResumed, RunStarted
+from rig.config.plans import SteppedSinePlan
 from rig.gui.controller import LocalRunController, RunController, RunEnd, RunRequest
 from rig.gui.live_data import Alarm, LiveRun
 from rig.gui.live_plots import LivePlots
 from rig.gui.run_control import RunControls, RunStatusPanel
 from rig.gui.run_setup import RunSetupPanel
-from rig.plans import SteppedSinePlan
+from rig.run.events import Event, PretestFinished, RunFinished, RunPaused, RunResumed, RunStarted
 
 __all__ = ["AcquisitionPanel"]
 

@@ -2,9 +2,10 @@
 
 The acquisition window talks to a :class:`RunController` only: it hands over a
 :class:`RunRequest` (plan, setup, backend, file), receives the run's events
-(:mod:`rig.events`) on the GUI thread through the :attr:`RunController.event` signal, and asks
+(:mod:`rig.run.events`) on the GUI thread through the :attr:`RunController.event` signal, and asks
 for pause, resume and abort. :class:`LocalRunController` runs the engine in a worker thread of
-this process (:func:`rig.runner.open_rig` and :class:`rig.runner.TestRun`, exactly what the
+this process (:func:`rig.run.session.open_rig` and :class:`rig.run.session.TestRun`, exactly what
+the
 command line runs); a controller backed by the acquisition service implements the same
 interface over its client.
 
@@ -25,13 +26,13 @@ from typing import Any
 
 from PySide6 import QtCore
 
-from rig.engine import RunEngine
-from rig.events import Event
+from rig.config.plans import Plan
+from rig.config.setup import LabSetup
 from rig.gui.sample_tap import SampleTap, TappedBackend, TimeTraces
-from rig.plans import Plan
-from rig.pretest import pretest_procedure
-from rig.runner import RunSession
-from rig.setup import LabSetup
+from rig.procedures.pretest import pretest_procedure
+from rig.run.engine import RunEngine
+from rig.run.events import Event
+from rig.run.session import RunSession
 
 __all__ = [
     "LocalRunController",
@@ -96,7 +97,7 @@ class RunEnd:
     path : Path or None
         The measurement file (None for a pretest or a run that could not start).
     lines : list of str
-        The one-screen summary (:meth:`rig.runner.RunSummary.lines`).
+        The one-screen summary (:meth:`rig.run.session.RunSummary.lines`).
     started : bool
         False when the run could not start (setup error, device busy, no backend).
     """
@@ -114,7 +115,7 @@ class RunController(QtCore.QObject):
     Signals (all delivered on the GUI thread)
     -----------------------------------------
     event(object)
-        Every :class:`rig.events.Event` of the run, in order.
+        Every :class:`rig.run.events.Event` of the run, in order.
     ended(object)
         A :class:`RunEnd` when the run (or pretest) is over, however it ended.
     amplifier(object)
@@ -262,7 +263,7 @@ class LocalRunController(RunController):
 
     # -- the run (worker thread) -----------------------------------------------------------
     def _run(self, request: RunRequest) -> RunEnd:
-        from rig.runner import open_rig
+        from rig.run.session import open_rig
 
         options = {**dict(request.backend_options), **self.extra_backend_options}
         if request.backend == "sim":

@@ -4,7 +4,8 @@
 entry with its error message right below it; :class:`RowsTable` edits an array of tables
 (frequency ranges, response limits, channels). Validation is the settings' own: the editor
 hands :meth:`SettingsForm.document` to the loader, and a
-:class:`~rig.tomlconfig.ConfigError` (``"plan form: excitation.levels_n[1]: must be > 0"``) is
+:class:`~rig.config.tomlconfig.ConfigError` (``"plan form: excitation.levels_n[1]: must be > 0"``)
+is
 shown next to the entry its key path names (:meth:`SettingsForm.show_error`).
 """
 

@@ -1,6 +1,6 @@
 """What the live plots show: a run's events accumulated (no Qt here).
 
-:class:`LiveRun` takes every event of :mod:`rig.events` in order and keeps what the acquisition
+:class:`LiveRun` takes every event of :mod:`rig.run.events` in order and keeps what the acquisition
 window draws: each finished step's frequency, level and phasors (the multi-harmonic FRFs grow
 from them step by step), the force controller's error at every iteration of the step under way,
 the iterations and outcome of every step, progress and an estimate of the time left, the
@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from rig.events import (
+from rig.run.events import (
     ControlIteration,
     Event,
     FaultRaised,
@@ -94,14 +94,14 @@ class LiveRun:
         Steps finished in this run, in order.
     channel_names : tuple of str
     current : object or None
-        The :class:`rig.plans.PlannedStep` under way.
+        The :class:`rig.config.plans.PlannedStep` under way.
     iterations : list of (int, float, str)
         (iteration, error, status) of the controller in the step under way.
     last_iterations : list of (int, float, str)
         The same for the previous step.
     alarms : list of Alarm
     pretest : object or None
-        :class:`rig.pretest.PretestReport`.
+        :class:`rig.procedures.pretest.PretestReport`.
     status, message : str
         How the run ended (``RunFinished``).
     revision : int

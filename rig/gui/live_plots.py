@@ -179,7 +179,7 @@ class LivePlots(QtWidgets.QWidget):
         self._orders: list[str] = ["1", "2", "3"]
 
     def prepare(self, channels, orders, tolerance: float) -> None:
-        """Channels of the run (``rig.setup.ChannelSetup``), the plan's orders and the
+        """Channels of the run (``rig.config.setup.ChannelSetup``), the plan's orders and the
         controller's amplitude tolerance (drawn as a line)."""
         names = tuple(c.name for c in channels)
         self._quantities = {c.name: (c.quantity, c.unit) for c in channels}

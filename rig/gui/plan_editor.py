@@ -1,8 +1,10 @@
 """The plan editor: frequency ranges, levels, orders, acquisition, control, limits, pretest.
 
 The form's sections are generated from the plan's settings dataclasses
-(:mod:`rig.plan_settings`, :class:`rig.control.force_controller.ControlSettings`); the plan is
-built with :func:`rig.plans.plan_from_dict`, the reader of plan files, so the form accepts what
+(:mod:`rig.config.plan_settings`, :class:`rig.procedures.force_control.ControlSettings`); the plan
+is
+built with :func:`rig.config.plans.plan_from_dict`, the reader of plan files, so the form accepts
+what
 a plan file accepts and says what is wrong the way the loader says it.
 """
 
@@ -12,11 +14,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from rig.control.force_controller import ControlSettings
-from rig.gui.forms import RowsTable, SettingsForm
-from rig.gui.settings_editor import SettingsEditor
-from rig.gui.settings_fields import Field, dataclass_fields
-from rig.plan_settings import (
+from rig.config.plan_settings import (
     DIRECTIONS,
     AcquisitionSettings,
     ControlPolicy,
@@ -28,7 +26,18 @@ from rig.plan_settings import (
     RandomExcitation,
     ResponseLimit,
 )
-from rig.plans import Plan, SteppedSinePlan, builtin_plans, describe_plan, load_plan, plan_from_dict
+from rig.config.plans import (
+    ControlSettings,
+    Plan,
+    SteppedSinePlan,
+    builtin_plans,
+    describe_plan,
+    load_plan,
+    plan_from_dict,
+)
+from rig.gui.forms import RowsTable, SettingsForm
+from rig.gui.settings_editor import SettingsEditor
+from rig.gui.settings_fields import Field, dataclass_fields
 from rig.signals.random import RANDOM_KINDS
 
 __all__ = ["PlanEditor"]
@@ -145,9 +154,9 @@ class PlanEditor(SettingsEditor):
         return plan_from_dict({**doc, "kind": self.kind}, self.source)
 
     def describe(self, value: Plan) -> str:
-        """The plan in a line, with the acquisition time a dry run gives (rig.dry_run)."""
+        """The plan in a line, with the acquisition time a dry run gives (rig.run.dry_run)."""
         from analysis.progress import format_duration
-        from rig.dry_run import dry_run
+        from rig.run.dry_run import dry_run
 
         try:
             seconds = dry_run(value).seconds

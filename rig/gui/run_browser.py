@@ -38,8 +38,8 @@ _STEP_COLUMNS = (
 
 def planned_steps(data: SteppedSineData) -> int | None:
     """Steps the file's plan has (None if the stored plan cannot be read)."""
-    from rig.plans import plan_from_dict
-    from rig.tomlconfig import ConfigError
+    from rig.config.plans import plan_from_dict
+    from rig.config.tomlconfig import ConfigError
 
     try:
         return plan_from_dict(data.config["plan"], f"plan stored in {data.path}").n_steps

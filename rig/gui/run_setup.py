@@ -3,7 +3,8 @@
 :class:`RunSetupPanel` has three tabs: *Run* (backend, file, options), *Lab setup*
 (:class:`~rig.gui.setup_editor.SetupEditor`) and *Plan* (:class:`~rig.gui.plan_editor.PlanEditor`).
 It re-checks everything a moment after every edit: the plan and the setup by their loaders,
-the plan's points against the setup's channels (:meth:`rig.setup.LabSetup.channels_for_points`);
+the plan's points against the setup's channels
+(:meth:`rig.config.setup.LabSetup.channels_for_points`);
 a problem is shown next to the field that causes it and the run cannot start until it is fixed.
 :meth:`RunSetupPanel.request` gives the :class:`~rig.gui.controller.RunRequest` to start.
 
@@ -24,13 +25,13 @@ from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
+from rig.config.plans import Plan
+from rig.config.setup import LabSetup, load_setup, setup_from_dict
+from rig.config.tomlconfig import ConfigError
 from rig.gui.controller import RunRequest
 from rig.gui.plan_editor import PlanEditor
 from rig.gui.setup_editor import SetupEditor
 from rig.gui.style import ALARM, OK
-from rig.plans import Plan
-from rig.setup import LabSetup, load_setup, setup_from_dict
-from rig.tomlconfig import ConfigError
 
 __all__ = [
     "RUNS_FOLDER_ENV",
@@ -363,7 +364,7 @@ class RunSetupPanel(QtWidgets.QTabWidget):
     # -- resume ----------------------------------------------------------------------------
     def set_resume(self, path: Path, data) -> None:
         """Complete an unfinished file: its stored plan and setup, its simulated rig."""
-        from rig.plans import plan_from_dict
+        from rig.config.plans import plan_from_dict
 
         plan = plan_from_dict(data.config["plan"], f"plan stored in {path}")
         setup = setup_from_dict(data.setup, f"setup stored in {path}")

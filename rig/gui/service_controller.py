@@ -4,7 +4,7 @@ The service owns the rig (its backend, lab setup and amplifier); the GUI submits
 follows the run's event stream in a worker thread and asks for pause, resume and abort
 (:class:`rig.service.client.ServiceClient`). The stream's events are JSON
 (:mod:`rig.service.codec`); :func:`~rig.service.codec.decode_event` turns them back into the
-event classes of :mod:`rig.events` (complex phasors from ``[re, im]`` pairs, NaN from
+event classes of :mod:`rig.run.events` (complex phasors from ``[re, im]`` pairs, NaN from
 ``null``), so the window draws a run on the service exactly as one in this process. The
 service does not stream samples, run a pretest alone or report its amplifier here: those views
 say so.
@@ -19,10 +19,10 @@ from typing import Any
 
 from PySide6 import QtCore
 
-from rig.events import (
+from rig.gui.controller import RunController, RunEnd, RunRequest
+from rig.run.events import (
     RunWarning,
 )
-from rig.gui.controller import RunController, RunEnd, RunRequest
 from rig.service.client import ServiceClient, ServiceError
 from rig.service.codec import decode_event
 

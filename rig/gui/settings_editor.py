@@ -16,9 +16,9 @@ from typing import Any
 import tomli_w
 from PySide6 import QtCore, QtWidgets
 
+from rig.config.tomlconfig import ConfigError
 from rig.gui.forms import SettingsForm
 from rig.gui.settings_fields import split_error
-from rig.tomlconfig import ConfigError
 
 __all__ = ["SettingsEditor"]
 

@@ -127,7 +127,8 @@ def dataclass_fields(
     """The fields of a settings dataclass, as the TOML reader reads them.
 
     The kind follows the default's type (bool: flag, int: integer, float or None: number,
-    tuple: numbers, str: text), like :func:`rig.plan_files._dataclass_fields`; ``choices`` and
+    tuple: numbers, str: text), like :func:`rig.config.plan_files._dataclass_fields`; ``choices``
+    and
     ``kinds`` override it.
     """
     choices, kinds, labels = dict(choices or {}), dict(kinds or {}), dict(labels or {})

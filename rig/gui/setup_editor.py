@@ -1,7 +1,7 @@
 """The lab-setup editor: DAQ, drive, amplifier and every channel with its sensitivity.
 
-Sections are generated from :mod:`rig.setup`'s dataclasses; the setup is built with
-:func:`rig.setup.setup_from_dict`, the reader of setup files.
+Sections are generated from :mod:`rig.config.setup`'s dataclasses; the setup is built with
+:func:`rig.config.setup.setup_from_dict`, the reader of setup files.
 """
 
 from __future__ import annotations
@@ -10,10 +10,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from rig.gui.forms import RowsTable, SettingsForm
-from rig.gui.settings_editor import SettingsEditor
-from rig.gui.settings_fields import dataclass_fields
-from rig.setup import (
+from rig.config.setup import (
     AmplifierSetup,
     ChannelSetup,
     DaqSetup,
@@ -23,6 +20,9 @@ from rig.setup import (
     load_setup,
     setup_from_dict,
 )
+from rig.gui.forms import RowsTable, SettingsForm
+from rig.gui.settings_editor import SettingsEditor
+from rig.gui.settings_fields import dataclass_fields
 
 __all__ = ["SetupEditor"]
 

@@ -19,7 +19,7 @@ and :class:`AuthenticationError` when the token is missing or wrong. The API its
 described in ``docs/service-api.md``.
 
 Events are dicts ``{"seq", "run", "type", "time_s", "data"}``: ``seq`` counts the run's events
-from 1 without gaps, ``type`` is the event class (:mod:`rig.events`: ``StepFinished``,
+from 1 without gaps, ``type`` is the event class (:mod:`rig.run.events`: ``StepFinished``,
 ``ControlIteration``, ``FaultRaised``, ...) or ``RunState`` (the service's own: queued, running,
 paused, and how the run ended), ``data`` the event's fields with arrays as lists and complex
 numbers as ``[re, im]`` pairs (:mod:`rig.service.codec`).
@@ -342,8 +342,8 @@ class ServiceClient:
         ----------
         plan : str, path, Plan or mapping
             A built-in plan name (``"paper"``, ``"quick"``, ``"linear"``), a plan file (read
-            here and sent as data), a :class:`rig.plans.SteppedSinePlan` /
-            :class:`rig.plans.RandomPlan`, or a plan table as a mapping.
+            here and sent as data), a :class:`rig.config.plans.SteppedSinePlan` /
+            :class:`rig.config.plans.RandomPlan`, or a plan table as a mapping.
         out : str, optional
             File name of the measurement file in the service's results folder (default
             ``<run id>-<plan>.h5``).

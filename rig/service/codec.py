@@ -1,4 +1,4 @@
-"""Events as JSON: one encoder for the frozen dataclasses of :mod:`rig.events`, and the decoder
+"""Events as JSON: one encoder for the frozen dataclasses of :mod:`rig.run.events`, and the decoder
 clients use to turn the stream back into them (:func:`decode_event`).
 
 An event becomes ``{"seq", "run", "type", "time_s", "data"}``: ``type`` is its class name,
@@ -29,7 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from rig.events import (
+from rig.config.plans import PlannedStep
+from rig.procedures.pretest import ChannelCheck, PretestReport
+from rig.run.events import (
     ControlIteration,
     Event,
     FaultRaised,
@@ -43,8 +45,6 @@ from rig.events import (
     StepFinished,
     StepStarted,
 )
-from rig.plans import PlannedStep
-from rig.pretest import ChannelCheck, PretestReport
 
 __all__ = ["decode_event", "encode_event", "event_line", "to_jsonable"]
 
@@ -112,12 +112,12 @@ def to_jsonable(obj: Any) -> Any:
 
 
 def encode_event(event: Any, run_id: str, seq: int) -> dict[str, Any]:
-    """The stream's object for an event of :mod:`rig.events` (or any frozen dataclass with a
+    """The stream's object for an event of :mod:`rig.run.events` (or any frozen dataclass with a
     ``time_s`` field).
 
     Parameters
     ----------
-    event : rig.events.Event
+    event : rig.run.events.Event
     run_id : str
         The run it belongs to.
     seq : int
@@ -193,7 +193,7 @@ def _pretest(d: dict[str, Any]) -> PretestReport:
 
 
 def decode_event(obj: dict[str, Any]) -> Event | None:
-    """The :mod:`rig.events` object of one event of the stream (None for the service's own
+    """The :mod:`rig.run.events` object of one event of the stream (None for the service's own
     ``RunState`` and for types this GUI does not draw)."""
     kind, d = obj.get("type"), obj.get("data", {})
     t = {"time_s": _float(obj.get("time_s"))}

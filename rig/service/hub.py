@@ -21,7 +21,7 @@ import os
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from rig.events import Event, RunPaused, RunResumed, RunStarted, StepFinished
+from rig.run.events import Event, RunPaused, RunResumed, RunStarted, StepFinished
 from rig.service.codec import encode_event, event_line
 from rig.service.state import FINAL_STATES, RunState, ServiceState
 

@@ -268,7 +268,7 @@ async def get_run(request: web.Request) -> web.Response:
 
 
 def _plan(spec: Any) -> Any:
-    from rig.plans import PlanTooLarge, builtin_plans, load_plan, plan_from_dict
+    from rig.config.plans import PlanTooLarge, builtin_plans, load_plan, plan_from_dict
 
     try:
         if isinstance(spec, str):
@@ -284,7 +284,7 @@ def _plan(spec: Any) -> Any:
         if isinstance(spec, dict):
             return plan_from_dict(spec, "submitted plan")
     except ValueError as exc:
-        # a plan beyond rig.plans.MAX_PLAN_STEPS is refused before its steps are listed
+        # a plan beyond rig.config.plans.MAX_PLAN_STEPS is refused before its steps are listed
         cause: BaseException | None = exc
         while cause is not None and not isinstance(cause, PlanTooLarge):
             cause = cause.__cause__
@@ -387,7 +387,7 @@ async def abort_run(request: web.Request) -> web.Response:
 
 
 async def run_result(request: web.Request) -> web.Response:
-    from rig.runner import summarize
+    from rig.run.session import summarize
 
     service = request.app[SERVICE]
     record = service.record(request.match_info["run_id"])
@@ -522,7 +522,7 @@ def serve(options: ServiceOptions, out: TextIO | None = None) -> int:
         If the service cannot start (another one runs for the directory, the device is in
         use, the port is taken, the setup is invalid); nothing is left running.
     """
-    from rig.setup import load_setup
+    from rig.config.setup import load_setup
 
     out = out or sys.stdout
     sdir = ServiceDir(options.service_dir)

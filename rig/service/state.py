@@ -5,7 +5,7 @@ engine waits), and ends ``success``, ``aborted`` or ``failed`` (the measurement 
 ``exit_status``), ``cancelled`` (aborted before it started) or ``interrupted`` (the service
 stopped or died while the run was under way or queued). An interrupted, aborted or failed
 stepped-sine run can be resumed: it is queued again and completes its file (the steps on disk
-are kept; :meth:`rig.runner.TestRun.resume`).
+are kept; :meth:`rig.run.session.TestRun.resume`).
 
 Every change is written to ``state.json`` at once (atomically, mode 0600), so a service that
 restarts, whether it was stopped or killed, knows every run and reports the interrupted ones;
@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from rig.events import Event
+from rig.run.events import Event
 from rig.service.client import FINAL_STATES
 from rig.service.directory import write_private
 
@@ -71,7 +71,7 @@ class RunRecord:
     path : str
         The measurement file.
     plan : dict
-        The plan as data (:meth:`rig.plans.SteppedSinePlan.to_dict`); rebuilt when it starts.
+        The plan as data (:meth:`rig.config.plans.SteppedSinePlan.to_dict`); rebuilt when it starts.
     label : str
     pause_on_fault : bool
         Recoverable faults pause the run instead of ending it.
@@ -269,7 +269,7 @@ class ServiceState:
         self, record: RunRecord, state: str, message: str, n_done: int, summary: Any = None
     ) -> None:
         """Record how an attempt ended (with the figures of its
-        :class:`~rig.runner.RunSummary`, if it ran)."""
+        :class:`~rig.run.session.RunSummary`, if it ran)."""
         with self.lock:
             record.state = state
             record.message = message

@@ -1,11 +1,11 @@
 """The thread that owns the rig: device lock, backend, amplifier, and the runs, one at a time.
 
-:class:`RigOwner` opens the rig once (:func:`rig.runner.open_rig`: the device lock first) and
+:class:`RigOwner` opens the rig once (:func:`rig.run.session.open_rig`: the device lock first) and
 keeps it for the life of the service. It takes runs from the queue (:class:`ServiceState`) in
-order and runs each as the headless ``rig run`` does (:class:`rig.runner.TestRun`, or
-:meth:`~rig.runner.TestRun.resume` for a run that continues its file), passing every event of
+order and runs each as the headless ``rig run`` does (:class:`rig.run.session.TestRun`, or
+:meth:`~rig.run.session.TestRun.resume` for a run that continues its file), passing every event of
 the run's engine to the service's event hub. Pause, resume and abort reach the run's
-:class:`~rig.engine.RunEngine` from any thread; a request that arrives before the engine
+:class:`~rig.run.engine.RunEngine` from any thread; a request that arrives before the engine
 exists is applied as soon as it does.
 
 Stopping (:meth:`RigOwner.stop`) aborts the run under way through its engine (the output ramps
@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rig.events import Event
-from rig.runner import RunSession
+from rig.run.events import Event
+from rig.run.session import RunSession
 from rig.service.state import RunRecord, RunState, ServiceState
 
 __all__ = ["RigOptions", "RigOwner"]
@@ -40,7 +40,7 @@ class RigOptions:
     Attributes
     ----------
     backend : {"sim", "ni"}
-    setup : rig.setup.LabSetup
+    setup : rig.config.setup.LabSetup
         The bench; every run uses it.
     backend_options : mapping
         Passed to the backend (``truth``, ``seed``, ``realtime`` for ``sim``).
@@ -135,7 +135,7 @@ class RigOwner(threading.Thread):
 
     # ------------------------------------------------------------------ the thread
     def run(self) -> None:
-        from rig.runner import open_rig
+        from rig.run.session import open_rig
 
         o = self.options
         try:
@@ -170,7 +170,7 @@ class RigOwner(threading.Thread):
                 self.on_exit()
 
     def _execute(self, rig, record: RunRecord) -> None:
-        from rig.plans import plan_from_dict
+        from rig.config.plans import plan_from_dict
 
         with self._lock:
             self._current = record

@@ -94,7 +94,7 @@ class _null:
 
 
 def test_the_workflow_shows_a_stage_s_progress_and_keeps_its_result(capsys):
-    from rig.workflow import _stage
+    from rig.cli.workflow import _stage
 
     script = (
         "import sys, json\n"
@@ -113,7 +113,7 @@ def test_the_workflow_shows_a_stage_s_progress_and_keeps_its_result(capsys):
 
 
 def test_a_failing_stage_quotes_its_error_output_not_its_progress():
-    from rig.workflow import StageError, _stage
+    from rig.cli.workflow import StageError, _stage
 
     script = (
         "import sys\nfrom analysis.progress import ProgressReporter\n"

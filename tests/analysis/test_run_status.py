@@ -72,7 +72,7 @@ def killed(tmp_path):
 
 
 def test_the_planned_steps_are_counted_as_the_rig_counts_them(no_steps) -> None:
-    from rig.plans import load_plan
+    from rig.config.plans import load_plan
 
     data = read_measurement(no_steps)
     assert planned_steps(data) == 28

@@ -1,6 +1,6 @@
 """Shared pieces of the run-engine tests: reduced plans, the simulated rig, a recording stand-in.
 
-Plans are tested by recording what they ask for on :class:`rig.dry_run.ModelPlant` (a linear
+Plans are tested by recording what they ask for on :class:`rig.run.dry_run.ModelPlant` (a linear
 model plant, no backend at all), given a :func:`context`. ``sim_daq`` and ``run_on_sim`` run
 plans on the real simulated rig (``sim_backend``) in its fast mode at a reduced sample rate.
 """
@@ -13,12 +13,12 @@ from pathlib import Path
 
 import numpy as np
 
-from rig.commands import (
+from rig.config.plans import FrequencyPlan, FrequencyRange, SteppedSinePlan, load_plan
+from rig.config.setup import LabSetup, load_setup
+from rig.run.commands import (
     RunContext,
 )
-from rig.plans import FrequencyPlan, FrequencyRange, SteppedSinePlan, load_plan
-from rig.runner import TestRun
-from rig.setup import LabSetup, load_setup
+from rig.run.session import TestRun
 from sim_backend.daq import FaultSwitches, SimulatedDaq
 
 FS_TEST = 5120.0  # sample rate of the tests on the simulated rig (orders up to 120 Hz)

@@ -47,7 +47,7 @@ def test_run_progress_for_a_parent_process_is_json_lines_with_the_step_count(tmp
     import io
 
     from analysis.progress import parse_line
-    from rig.cli_run import ProgressPrinter
+    from rig.cli.run import ProgressPrinter
     from tests.rig.rig_helpers import reduced_plan, run_on_sim
 
     stream = io.StringIO()
@@ -63,7 +63,7 @@ def test_run_progress_for_a_parent_process_is_json_lines_with_the_step_count(tmp
 def test_run_progress_on_a_log_says_the_time_left(tmp_path):
     import io
 
-    from rig.cli_run import ProgressPrinter
+    from rig.cli.run import ProgressPrinter
     from tests.rig.rig_helpers import reduced_plan, run_on_sim
 
     stream = io.StringIO()

@@ -8,7 +8,7 @@ import pytest
 
 from analysis.measurement_file import read_measurement
 from analysis.predict import SteppedSinePredictor
-from rig.events import (
+from rig.run.events import (
     ControlIteration,
     EventBus,
     PretestFinished,
@@ -125,7 +125,7 @@ def test_pause_and_resume_from_another_thread(tmp_path):
             threading.Thread(target=operator).start()
 
     daq = sim_daq(setup, record_output=True)
-    from rig.runner import TestRun
+    from rig.run.session import TestRun
 
     run = TestRun(daq, plan, setup, tmp_path / "p.h5")
     holder["run"] = run
@@ -153,7 +153,7 @@ def test_abort_from_another_thread_keeps_completed_steps(tmp_path):
             t.start()
             t.join()
 
-    from rig.runner import TestRun
+    from rig.run.session import TestRun
 
     daq = sim_daq(setup, record_output=True)
     run = TestRun(daq, plan, setup, tmp_path / "a.h5")

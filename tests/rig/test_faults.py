@@ -8,12 +8,11 @@ import pytest
 
 from analysis.measurement_file import read_measurement
 from rig.backends.protocol import BackendError
-from rig.commands import WriteStep
-from rig.control.force_controller import ControlSettings
-from rig.events import FaultRaised, RunWarning, StepFinished
-from rig.plans import ControlPolicy, Limits, ResponseLimit
-from rig.runner import TestRun, open_rig
-from rig.safety import PLATEAU_EXPONENT, PLATEAU_EXPONENT_ANY_LEVEL, flat_tops
+from rig.config.plans import ControlPolicy, ControlSettings, Limits, ResponseLimit
+from rig.run.commands import WriteStep
+from rig.run.events import FaultRaised, RunWarning, StepFinished
+from rig.run.safety import PLATEAU_EXPONENT, PLATEAU_EXPONENT_ANY_LEVEL, flat_tops
+from rig.run.session import TestRun, open_rig
 from sim_backend.amplifier import AmplifierModel
 from sim_backend.daq import FaultSwitches, SimulatedDaq
 from sim_backend.serial_amplifier import SimulatedAmplifierPort

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rig.control import ControlSettings, ForceController, loop_check_gain
+from rig.procedures.force_control import ControlSettings, ForceController, loop_check_gain
 from rig.signals import MultisineSpec
 
 TARGETS = MultisineSpec().force_targets(4.0, fundamental_phase_rad=0.3)

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from rig.gain_prediction import GainHistory
-from rig.plans import PlannedStep
+from rig.config.plans import PlannedStep
+from rig.procedures.gain_prediction import GainHistory
 
 ORDERS = (1, 2, 3)
 

@@ -11,8 +11,14 @@ from pathlib import Path
 
 import pytest
 
-from rig.lock import SYSTEM_LOCK_DIRS, DeviceBusyError, DeviceLock, default_lock_dir, lock_holder
-from rig.runner import open_rig
+from rig.run.lock import (
+    SYSTEM_LOCK_DIRS,
+    DeviceBusyError,
+    DeviceLock,
+    default_lock_dir,
+    lock_holder,
+)
+from rig.run.session import open_rig
 from tests.rig.rig_helpers import setup_at
 
 
@@ -35,7 +41,7 @@ def test_lock_held_by_another_process_and_freed_when_it_is_killed(tmp_path):
     code = textwrap.dedent(
         f"""
         import time
-        from rig.lock import DeviceLock
+        from rig.run.lock import DeviceLock
         lock = DeviceLock("cDAQ1", {str(tmp_path)!r}).acquire()
         print("locked", flush=True)
         time.sleep(60)
@@ -94,7 +100,7 @@ def test_two_users_see_each_others_lock_of_a_real_device(tmp_path):
     holder_code = textwrap.dedent(
         f"""
         import time
-        from rig.lock import DeviceLock
+        from rig.run.lock import DeviceLock
         lock = DeviceLock({device!r}).acquire()
         print(lock.path, flush=True)
         time.sleep(60)
@@ -102,7 +108,7 @@ def test_two_users_see_each_others_lock_of_a_real_device(tmp_path):
     )
     taker_code = textwrap.dedent(
         f"""
-        from rig.lock import DeviceBusyError, DeviceLock
+        from rig.run.lock import DeviceBusyError, DeviceLock
         try:
             DeviceLock({device!r}).acquire()
         except DeviceBusyError as exc:

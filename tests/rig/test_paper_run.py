@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from analysis.measurement_file import read_measurement
-from rig.plans import load_plan
+from rig.config.plans import load_plan
 from tests.rig.rig_helpers import run_on_sim, setup_at
 
 

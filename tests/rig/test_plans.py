@@ -7,7 +7,11 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from rig.commands import (
+from rig.config.plans import builtin_plans, describe_plan, load_plan, plan_from_dict
+from rig.config.tomlconfig import ConfigError
+from rig.procedures.random_test import random_procedure
+from rig.procedures.stepped_sine import stepped_sine_procedure
+from rig.run.commands import (
     Acquire,
     AcquireRecords,
     BeginStep,
@@ -18,13 +22,9 @@ from rig.commands import (
     WriteRandom,
     WriteStep,
 )
-from rig.dry_run import ModelPlant
-from rig.events import ControlIteration, PretestFinished
-from rig.faults import RunFault
-from rig.plans import builtin_plans, describe_plan, load_plan, plan_from_dict
-from rig.run_random import random_procedure
-from rig.run_stepped import stepped_sine_procedure
-from rig.tomlconfig import ConfigError
+from rig.run.dry_run import ModelPlant
+from rig.run.events import ControlIteration, PretestFinished
+from rig.run.faults import RunFault
 from tests.rig.rig_helpers import context, reduced_plan, setup_at
 
 
@@ -125,7 +125,7 @@ def test_own_plan_file(tmp_path):
 
 
 def test_a_plan_beyond_the_step_limit_is_refused_before_its_steps_are_listed(tmp_path):
-    from rig.plans import MAX_PLAN_STEPS, PlanTooLarge
+    from rig.config.plans import MAX_PLAN_STEPS, PlanTooLarge
 
     # one range of 19 billion frequencies: refused from its settings, at its key
     text = builtin_plans()["quick"].read_text()
@@ -345,7 +345,7 @@ def test_a_target_above_the_peak_is_found_beyond_the_dip():
 
 
 def test_dry_run_counts_the_time_the_measurements_take():
-    from rig.dry_run import dry_run
+    from rig.run.dry_run import dry_run
 
     base = reduced_plan(levels_n=(2.0,), ranges=((25.0, 25.0, 1.0),))
     acq = base.acquisition
@@ -365,7 +365,7 @@ def test_dry_run_counts_the_time_the_measurements_take():
 
 
 def test_plans_show_lists_the_steps_and_the_time(capsys):
-    from rig.cli import main
+    from rig.cli.main import main
 
     assert main(["plans", "show", "quick", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from analysis.measurement_file import FORMAT_VERSION, MeasurementFileError, read_measurement
-from rig.events import StepFinished
-from rig.runner import TestRun
+from rig.run.events import StepFinished
+from rig.run.session import TestRun
 from tests.rig.rig_helpers import reduced_plan, run_on_sim, setup_at, sim_daq
 
 PLAN = reduced_plan(levels_n=(2.0, 4.0), ranges=((21.0, 23.0, 1.0),))

@@ -12,8 +12,8 @@ import pytest
 import tomli_w
 
 from analysis.measurement_file import read_measurement
-from rig.plans import builtin_plans
-from rig.setup import load_setup
+from rig.config.plans import builtin_plans
+from rig.config.setup import load_setup
 
 ENV = {**os.environ, "OMP_NUM_THREADS": "1"}
 
@@ -197,7 +197,7 @@ def test_run_linear_and_export(files, tmp_path):
 
 def test_top_level_help_lists_each_command_once():
     """``rig --help`` names every command on one line of its own, once."""
-    from rig.cli import build_parser
+    from rig.cli.main import build_parser
 
     text = build_parser().format_help()
     names = list(build_parser()._subparsers._group_actions[0].choices)
@@ -224,7 +224,7 @@ def test_an_existing_output_file_names_the_command_line_flag(tmp_path):
 def test_the_library_keeps_its_own_wording_and_the_cli_rephrases_each_kind(tmp_path):
     from analysis.measurement_file import OutputExistsError
     from analysis.measurement_file.layout import build_file
-    from rig.cli import file_exists_message
+    from rig.cli.main import file_exists_message
 
     out = tmp_path / "x.h5"
     out.write_bytes(b"")
@@ -302,7 +302,7 @@ def test_a_bad_fault_is_refused_with_the_syntax(files, tmp_path, spec, expected)
 
 
 def test_fault_specs_parse():
-    from rig.faults import SimFault, parse_sim_fault
+    from rig.run.faults import SimFault, parse_sim_fault
 
     assert parse_sim_fault("acc7:disconnect@step3") == SimFault("disconnect", "acc7", None, 3)
     assert parse_sim_fault("acc7:clip=12") == SimFault("clip", "acc7", 12.0, 1)

@@ -6,8 +6,8 @@ import threading
 import numpy as np
 
 from analysis.measurement_file import read_measurement
-from rig.events import RunPaused, StepFinished
-from rig.runner import RunSession
+from rig.run.events import RunPaused, StepFinished
+from rig.run.session import RunSession
 from tests.rig.rig_helpers import reduced_plan, setup_at, sim_daq
 
 PLAN = reduced_plan(levels_n=(2.0,), ranges=((21.0, 22.0, 1.0),))

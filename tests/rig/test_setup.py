@@ -5,8 +5,8 @@ import json
 
 import pytest
 
-from rig.setup import ChannelSetup, LabSetup, load_setup, setup_from_dict
-from rig.tomlconfig import ConfigError
+from rig.config.setup import ChannelSetup, LabSetup, load_setup, setup_from_dict
+from rig.config.tomlconfig import ConfigError
 
 
 @pytest.fixture(scope="module")

@@ -10,8 +10,8 @@ from analysis.measurement_file import (
     create_stepped_sine,
     write_random,
 )
-from rig.export_uff import export_uff
-from rig.setup import load_setup
+from rig.config.setup import load_setup
+from rig.export.uff import export_uff
 
 SETUP = load_setup("reference")
 CHANNELS = SETUP.channels_for_points([3, 6, 7])

@@ -4,8 +4,8 @@ import json
 
 import pytest
 
-from rig.plans import builtin_plans
-from rig.workflow import run_workflow
+from rig.cli.workflow import run_workflow
+from rig.config.plans import builtin_plans
 
 TRUTH_GAP_M = 0.60e-3  # the reference truth's gap
 TRUTH_KC = 4.51e5

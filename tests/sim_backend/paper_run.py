@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rig.control.force_controller import ControlSettings, ForceController, loop_check_gain
 from rig.estimation.harmonics import estimate_harmonics
+from rig.procedures.force_control import ControlSettings, ForceController, loop_check_gain
 from tests.sim_backend.rig_setup import ORDERS
 
 RAMP_S = 0.1

@@ -18,9 +18,9 @@ from pathlib import Path  # noqa: E402
 import pytest  # noqa: E402
 import tomli_w  # noqa: E402
 
-from rig.plans import FrequencyPlan, FrequencyRange, load_plan  # noqa: E402
-from rig.runner import TestRun, open_rig  # noqa: E402
-from rig.setup import load_setup  # noqa: E402
+from rig.config.plans import FrequencyPlan, FrequencyRange, load_plan  # noqa: E402
+from rig.config.setup import load_setup  # noqa: E402
+from rig.run.session import TestRun, open_rig  # noqa: E402
 from sim_backend.truth import TRUTH_DIR  # noqa: E402
 
 

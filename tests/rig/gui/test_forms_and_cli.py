@@ -7,11 +7,11 @@ import dataclasses
 import pytest
 from PySide6 import QtWidgets
 
+from rig.config.plan_settings import AcquisitionSettings, PretestSettings
+from rig.config.plans import load_plan, plan_from_dict
+from rig.config.setup import load_setup, setup_from_dict
 from rig.gui.live_data import LiveRun
 from rig.gui.settings_fields import dataclass_fields, label_of, parse_value, split_error
-from rig.plan_settings import AcquisitionSettings, PretestSettings
-from rig.plans import load_plan, plan_from_dict
-from rig.setup import load_setup, setup_from_dict
 
 
 def test_fields_are_generated_from_the_dataclasses():
@@ -100,8 +100,8 @@ def test_live_run_progress_and_time_left():
 
     import numpy as np
 
-    from rig.events import RunPaused, RunResumed, RunStarted, StepFinished, StepStarted
-    from rig.plans import PlannedStep
+    from rig.config.plans import PlannedStep
+    from rig.run.events import RunPaused, RunResumed, RunStarted, StepFinished, StepStarted
 
     live = LiveRun()
     live.add(RunStarted("quick", "stepped-sine", 10, 2, "run.h5"), now=0.0)
@@ -133,7 +133,7 @@ def test_live_run_progress_and_time_left():
 
 @pytest.mark.slow
 def test_rig_gui_command_starts_the_window(qtbot, monkeypatch, damper_run, reference_model_file):
-    from rig.cli import main
+    from rig.cli.main import main
     from rig.gui.app import LabWindow
     from rig.gui.controller import LocalRunController
 

@@ -31,7 +31,7 @@ def service(tmp_path, bench):  # noqa: F811 - the service tests' bench fixture
 
 def test_events_decode_to_what_the_engine_published():
     from analysis.measurement_file import StepRecord
-    from rig.events import ControlIteration, StepFinished
+    from rig.run.events import ControlIteration, StepFinished
 
     record = StepRecord(
         plan_index=3,

@@ -20,8 +20,8 @@ from pathlib import Path
 import pytest
 import tomli_w
 
+from rig.config.setup import load_setup
 from rig.service.client import ServiceClient
-from rig.setup import load_setup
 
 ENV = {
     k: v

@@ -9,7 +9,7 @@ import threading
 
 import pytest
 
-from rig.plans import load_plan
+from rig.config.plans import load_plan
 from rig.service.auth import bearer_token, ensure_token, read_token, token_matches
 from rig.service.client import ServiceClient, ServiceUnavailable, _plan_payload
 from rig.service.directory import ServiceDir, default_service_dir

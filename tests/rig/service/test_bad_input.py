@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from rig.plans import load_plan
+from rig.config.plans import load_plan
 from tests.rig.service.test_service import _raw
 
 
@@ -55,7 +55,7 @@ def test_an_out_name_with_a_newline_or_other_control_character_is_refused(shared
 
 @pytest.mark.timeout(60)
 def test_a_plan_beyond_the_step_limit_is_refused_before_it_is_expanded(shared_service):
-    from rig.plans import MAX_PLAN_STEPS
+    from rig.config.plans import MAX_PLAN_STEPS
 
     svc = shared_service
     before = svc.client().runs()

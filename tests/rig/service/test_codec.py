@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from analysis.measurement_file import StepRecord
-from rig.events import (
+from rig.config.plans import load_plan
+from rig.procedures.pretest import ChannelCheck, PretestReport
+from rig.run.events import (
     ControlIteration,
     FaultRaised,
     PretestFinished,
@@ -22,8 +24,6 @@ from rig.events import (
     StepFinished,
     StepStarted,
 )
-from rig.plans import load_plan
-from rig.pretest import ChannelCheck, PretestReport
 from rig.service.codec import encode_event, event_line, to_jsonable
 from rig.service.state import RunState
 

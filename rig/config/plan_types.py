@@ -1,7 +1,8 @@
 """The plan classes: :class:`SteppedSinePlan`, :class:`RandomPlan`, :class:`PlannedStep`.
 
-Their parts are in :mod:`rig.plan_settings`, reading and writing plan files in
-:mod:`rig.plan_files`; :mod:`rig.plans` is where users import all of them from (its docstring
+Their parts are in :mod:`rig.config.plan_settings`, reading and writing plan files in
+:mod:`rig.config.plan_files`; :mod:`rig.config.plans` is where users import all of them from (its
+docstring
 has the file layout).
 """
 
@@ -15,7 +16,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from rig.plan_settings import (
+from rig.config.plan_settings import (
     MAX_PLAN_STEPS,
     AcquisitionSettings,
     ControlPolicy,

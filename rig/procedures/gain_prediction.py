@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rig.plans import PlannedStep
+from rig.config.plans import PlannedStep
 
 __all__ = ["GainHistory"]
 

@@ -1,9 +1,9 @@
 """The run engine: executes a procedure's commands on a DAQ backend, safely.
 
-A procedure (a generator of :mod:`rig.commands`) decides what to do; the engine does it:
+A procedure (a generator of :mod:`rig.run.commands`) decides what to do; the engine does it:
 synthesises and writes drive waveforms, reads the inputs in phase-synchronous blocks, runs the
-settling test, checks every block against the limits (:mod:`rig.safety`), writes completed
-steps through a sink (the measurement file), and publishes events (:mod:`rig.events`).
+settling test, checks every block against the limits (:mod:`rig.run.safety`), writes completed
+steps through a sink (the measurement file), and publishes events (:mod:`rig.run.events`).
 
 Whatever way the run ends, the engine ramps the output to 0 V (the backend's ``stop()``) and
 mutes the amplifier if it controls one: on success, on an abort (the operator, a signal, an
@@ -17,7 +17,7 @@ Pause, resume and abort may be called from any thread. A pause takes effect at t
 (at most ``read_chunk_s`` of data later): the output ramps to 0 V and the run waits; on resume
 the drive is re-applied and the acquisition in progress starts again, settling included (the
 force controller's state stays valid: the same drive is applied again). With
-``pause_on_fault``, recoverable faults (:data:`rig.faults.RECOVERABLE`: clipping, a silent
+``pause_on_fault``, recoverable faults (:data:`rig.run.faults.RECOVERABLE`: clipping, a silent
 sensor, no force, an amplifier overload) pause the run instead of ending it.
 """
 
@@ -36,7 +36,10 @@ from typing import Any, Protocol
 import numpy as np
 
 from rig.backends.protocol import BackendError, DaqBackend, ReadTimeoutError
-from rig.commands import (
+from rig.config.plans import Limits
+from rig.estimation.harmonics import estimate_harmonics, period_aligned_offset
+from rig.estimation.settling import SettlingCriteria, check_settling
+from rig.run.commands import (
     Acquire,
     AcquireRecords,
     BeginStep,
@@ -52,9 +55,7 @@ from rig.commands import (
     WriteRandom,
     WriteStep,
 )
-from rig.estimation.harmonics import estimate_harmonics, period_aligned_offset
-from rig.estimation.settling import SettlingCriteria, check_settling
-from rig.events import (
+from rig.run.events import (
     Event,
     EventBus,
     FaultRaised,
@@ -66,9 +67,8 @@ from rig.events import (
     StepFinished,
     StepStarted,
 )
-from rig.faults import RunAborted, RunFault
-from rig.plans import Limits
-from rig.safety import SignalChecks, deferred_interrupts
+from rig.run.faults import RunAborted, RunFault
+from rig.run.safety import SignalChecks, deferred_interrupts
 from rig.signals.multisine import PeriodPlan, plan_period, synthesize
 
 __all__ = ["RunEngine", "RunOutcome", "StepSink"]
@@ -95,7 +95,7 @@ class RunOutcome:
     message : str
         What happened, in words (the file's ``exit_message``; empty on success).
     fault_kind : str
-        Kind of the :class:`~rig.faults.RunFault` that ended the run, else "".
+        Kind of the :class:`~rig.run.faults.RunFault` that ended the run, else "".
     interrupted : bool
         Ended by Ctrl-C or a signal.
     steps_written : int
@@ -146,8 +146,8 @@ class RunEngine:
     ----------
     backend : DaqBackend
         Opened (not necessarily configured); the caller closes it.
-    setup : rig.setup.LabSetup
-    channels : sequence of rig.setup.ChannelSetup
+    setup : rig.config.setup.LabSetup
+    channels : sequence of rig.config.setup.ChannelSetup
         Channels to acquire (one of them the drive force).
     limits : Limits
         The plan's drive limit and response limits.
@@ -246,7 +246,7 @@ class RunEngine:
         Parameters
         ----------
         procedure : callable(RunContext) -> generator
-            Yields commands (:mod:`rig.commands`).
+            Yields commands (:mod:`rig.run.commands`).
         sink : object, optional
             Receives ``append_step(record)`` (and ``append_raw(...)``, ``write_random(frf)``).
 

@@ -27,8 +27,8 @@ import sys
 
 from rig.backends import available_backends, open_backend
 from rig.backends.protocol import BackendError, reference_values
-from rig.cli_run import EXIT_INTERRUPTED, EXIT_USAGE, add_run_commands
-from rig.cli_service import add_service_commands
+from rig.cli.run import EXIT_INTERRUPTED, EXIT_USAGE, add_run_commands
+from rig.cli.service import add_service_commands
 
 
 def cmd_backends(args) -> dict:
@@ -167,7 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def cmd_workflow(args) -> dict:
-    from rig.workflow import run_workflow
+    from rig.cli.workflow import run_workflow
 
     summary = run_workflow(
         args.out,
@@ -252,7 +252,7 @@ def file_exists_message(exc: FileExistsError) -> str:
 
     if isinstance(exc, OutputExistsError):
         return exc.rephrased("--overwrite")
-    # rig.runner and rig.export_uff raise a plain FileExistsError with the library's wording
+    # rig.run.session and rig.export.uff raise a plain FileExistsError with the library's wording
     return re.sub(r"(pass|use) (--)?overwrite(=True)?\b", "pass --overwrite", str(exc))
 
 

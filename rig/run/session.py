@@ -8,10 +8,10 @@ This is what the command line, the GUI and a service call::
         summary = run.execute()                  # ramps to 0 V however it ends
     print("\\n".join(summary.lines()))
 
-:func:`open_rig` takes the device lock (:mod:`rig.lock`) before it opens the backend and, when
+:func:`open_rig` takes the device lock (:mod:`rig.run.lock`) before it opens the backend and, when
 the setup names a serial port, prepares the power amplifier. :class:`TestRun` creates the
 measurement file (or reopens it to resume: :meth:`TestRun.resume`), runs the plan's procedure on
-a :class:`~rig.engine.RunEngine`, and records how the run ended in the file.
+a :class:`~rig.run.engine.RunEngine`, and records how the run ended in the file.
 """
 
 from __future__ import annotations
@@ -37,14 +37,14 @@ from analysis.measurement_file import (
     write_random,
 )
 from rig.backends import open_backend
-from rig.engine import Procedure, RunEngine, RunOutcome
-from rig.events import EventBus, RunStarted
-from rig.lock import DeviceLock, user_lock_dir
-from rig.plans import Plan, RandomPlan, SteppedSinePlan, plan_from_dict
-from rig.run_random import random_procedure
-from rig.run_stepped import stepped_sine_procedure
-from rig.safety import deferred_interrupts
-from rig.setup import LabSetup, setup_from_dict
+from rig.config.plans import Plan, RandomPlan, SteppedSinePlan, plan_from_dict
+from rig.config.setup import LabSetup, setup_from_dict
+from rig.procedures.random_test import random_procedure
+from rig.procedures.stepped_sine import stepped_sine_procedure
+from rig.run.engine import Procedure, RunEngine, RunOutcome
+from rig.run.events import EventBus, RunStarted
+from rig.run.lock import DeviceLock, user_lock_dir
+from rig.run.safety import deferred_interrupts
 
 __all__ = [
     "Rig",
@@ -96,7 +96,7 @@ def open_rig(
         Passed to the backend (``truth``, ``seed``, ``realtime``, ... for ``sim``); ``ni`` gets
         the setup's device unless given.
     lock_dir : path, optional
-        Directory of the device locks (default: the machine-wide one of :mod:`rig.lock` for a
+        Directory of the device locks (default: the machine-wide one of :mod:`rig.run.lock` for a
         real device, the per-user one for a simulated device).
     amplifier_port : str, optional
         Serial port of the amplifier (default the setup's; "" for none).
@@ -344,7 +344,8 @@ class TestRun:
     pause_on_fault : bool
         Pause on recoverable faults instead of ending (for a GUI that can resume).
     initial_gain : ndarray, optional
-        Drive-to-force gain for the first step (see :func:`rig.run_stepped.stepped_sine_procedure`).
+        Drive-to-force gain for the first step (see
+        :func:`rig.procedures.stepped_sine.stepped_sine_procedure`).
     overwrite : bool
         Replace an existing file.
     run_info : mapping, optional

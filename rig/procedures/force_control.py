@@ -59,7 +59,8 @@ from fractions import Fraction
 
 import numpy as np
 
-from rig.signals.multisine import as_orders, waveform_peak_v
+from rig.config.plan_settings import ControlSettings
+from rig.signals.multisine import waveform_peak_v
 
 __all__ = [
     "ControlDecision",
@@ -70,102 +71,6 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
-
-_POSITIVE = (
-    "max_drive_v",
-    "fundamental_amplitude_tolerance",
-    "fundamental_phase_tolerance_deg",
-    "harmonic_tolerance",
-    "max_step_ratio",
-    "gain_uncertainty",
-    "coupling_uncertainty",
-)
-
-
-@dataclass(frozen=True)
-class ControlSettings:
-    """Tolerances, estimator prior and safety limits of the force controller.
-
-    Parameters
-    ----------
-    orders : tuple of Fraction
-        Harmonic orders (H); order 1 must be present.
-    max_drive_v : float
-        Largest allowed peak of the drive waveform [V] (keep it below the output limit).
-    fundamental_amplitude_tolerance : float
-        Relative amplitude tolerance of the fundamental force.
-    fundamental_phase_tolerance_deg : float
-        Phase tolerance of the fundamental force [deg].
-    harmonic_tolerance : float
-        Tolerance of order k relative to its own target: ``|F_k - T_k| <= tol |T_k|``.
-    harmonic_floor_ratio : float
-        Absolute floor of that tolerance relative to ``|T_1|`` (needed for zero targets).
-    max_iterations : int
-        Most measurements per step.
-    max_step_ratio : float
-        Largest drive change per iteration relative to ``|V|`` (2-norm over orders).
-    gain_uncertainty : float
-        Prior relative standard deviation of the initial diagonal gains.
-    coupling_uncertainty : float
-        Prior standard deviation of a cross-order gain relative to ``sqrt(|J_ii J_jj|)``.
-    gain_drift : float
-        Fraction of the prior covariance added before each update (0 keeps every secant,
-        right only for a linear plant).
-    divergence_patience : int
-        Diverged if the error grew over this many consecutive iterations.
-    max_gain_ratio : float
-        Diverged if a diagonal gain changes magnitude by more than this factor (either way).
-    max_gain_phase_change_deg : float
-        Diverged if a diagonal gain rotates by more than this [deg].
-    max_condition : float
-        Diverged if the gain matrix's condition number exceeds this (singular estimate).
-    """
-
-    orders: tuple[Fraction, ...] = (Fraction(1), Fraction(2), Fraction(3))
-    max_drive_v: float = 1.0
-    fundamental_amplitude_tolerance: float = 0.01
-    fundamental_phase_tolerance_deg: float = 1.0
-    harmonic_tolerance: float = 0.10
-    harmonic_floor_ratio: float = 0.002
-    max_iterations: int = 8
-    max_step_ratio: float = 0.5
-    gain_uncertainty: float = 0.3
-    coupling_uncertainty: float = 0.03
-    gain_drift: float = 0.3
-    divergence_patience: int = 2
-    max_gain_ratio: float = 10.0
-    max_gain_phase_change_deg: float = 90.0
-    max_condition: float = 1e6
-
-    def __post_init__(self) -> None:
-        orders = as_orders(self.orders, "ControlSettings.orders")
-        if Fraction(1) not in orders:
-            raise ValueError("ControlSettings.orders: order 1 (the fundamental) must be present")
-        object.__setattr__(self, "orders", orders)
-        for name in _POSITIVE:
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"ControlSettings.{name}: must be finite and > 0, got {value}")
-        for name in ("harmonic_floor_ratio", "gain_drift"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"ControlSettings.{name}: must be finite and >= 0, got {value}")
-        for name in ("max_iterations", "divergence_patience"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"ControlSettings.{name}: must be >= 1, got {getattr(self, name)}")
-        for name in ("max_gain_ratio", "max_condition"):
-            if not getattr(self, name) > 1:
-                raise ValueError(f"ControlSettings.{name}: must be > 1, got {getattr(self, name)}")
-        if not 0 < self.max_gain_phase_change_deg <= 180:
-            raise ValueError(
-                "ControlSettings.max_gain_phase_change_deg: must be in (0, 180], got "
-                f"{self.max_gain_phase_change_deg}"
-            )
-
-    @property
-    def fundamental_index(self) -> int:
-        """Column of order 1."""
-        return self.orders.index(Fraction(1))
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ and lock files are readable and writable by all, so that any user can take a fre
 who holds a busy one. Lock files are opened without ``O_CREAT`` when they exist, which
 ``fs.protected_regular`` would refuse for another user's file in a sticky directory.
 
-Simulated devices exist once per process, not once per machine: :func:`rig.runner.open_rig`
+Simulated devices exist once per process, not once per machine: :func:`rig.run.session.open_rig`
 locks them in :func:`user_lock_dir` (``RIG_LOCK_DIR``, ``$XDG_RUNTIME_DIR/clearance-rig`` or
 ``~/.cache/clearance-rig/locks``) so that two users can each run the simulator.
 """

@@ -1,7 +1,7 @@
 """Reading test plans from TOML: built-in plans by name, plan files by path, stored plans.
 
-Every error is a :class:`~rig.tomlconfig.ConfigError` naming the source and the key path. The
-file layout is described in :mod:`rig.plans`.
+Every error is a :class:`~rig.config.tomlconfig.ConfigError` naming the source and the key path. The
+file layout is described in :mod:`rig.config.plans`.
 """
 
 from __future__ import annotations
@@ -12,11 +12,11 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from rig.control.force_controller import ControlSettings
-from rig.plan_settings import (
+from rig.config.plan_settings import (
     DIRECTIONS,
     AcquisitionSettings,
     ControlPolicy,
+    ControlSettings,
     ExcitationSettings,
     FrequencyPlan,
     FrequencyRange,
@@ -26,9 +26,9 @@ from rig.plan_settings import (
     RandomExcitation,
     ResponseLimit,
 )
-from rig.plan_types import Plan, RandomPlan, SteppedSinePlan
+from rig.config.plan_types import Plan, RandomPlan, SteppedSinePlan
+from rig.config.tomlconfig import ConfigError, Table, read_toml
 from rig.signals.multisine import as_orders
-from rig.tomlconfig import ConfigError, Table, read_toml
 
 __all__ = ["builtin_plans", "describe_plan", "load_plan", "plan_from_dict"]
 

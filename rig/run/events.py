@@ -76,14 +76,14 @@ class RunStarted(Event):
 
 @dataclass(frozen=True)
 class PretestFinished(Event):
-    """The pretest's result (:class:`rig.pretest.PretestReport`)."""
+    """The pretest's result (:class:`rig.procedures.pretest.PretestReport`)."""
 
     report: Any
 
 
 @dataclass(frozen=True)
 class StepStarted(Event):
-    """A stepped-sine step began (:class:`rig.plans.PlannedStep`)."""
+    """A stepped-sine step began (:class:`rig.config.plans.PlannedStep`)."""
 
     step: Any
     n_steps: int
@@ -129,7 +129,7 @@ class StepFinished(Event):
     ----------
     record : analysis.measurement_file.StepRecord
         Realised frequency, phasors and standard errors of every channel, drive phasors.
-    control : rig.control.StepControlRecord or None
+    control : rig.procedures.force_control.StepControlRecord or None
         Every iteration of the force controller.
     channel_names : tuple of str
     n_done, n_steps : int
@@ -171,7 +171,7 @@ class RunWarning(Event):
 
 @dataclass(frozen=True)
 class FaultRaised(Event):
-    """A fault stopped (or paused) the run; ``kind`` as :class:`rig.faults.RunFault`."""
+    """A fault stopped (or paused) the run; ``kind`` as :class:`rig.run.faults.RunFault`."""
 
     kind: str
     message: str

@@ -7,12 +7,15 @@ Two kinds of plan exist:
 - :class:`RandomPlan` (``kind = "random"``): band-limited random excitation at a low level for
   the H1 FRFs of the linear test.
 
-A plan names the lab setup it expects (:mod:`rig.setup`) and the measurement points it records;
+A plan names the lab setup it expects (:mod:`rig.config.setup`) and the measurement points it
+records;
 the drive point is the setup's. Built-in plans live in ``rig/plans/*.toml`` (``paper``,
-``quick``, ``linear``); :func:`load_plan` also reads any plan file (:mod:`rig.plan_files`).
-The plan classes are in :mod:`rig.plan_types`, their parts in :mod:`rig.plan_settings`; this
+``quick``, ``linear``); :func:`load_plan` also reads any plan file (:mod:`rig.config.plan_files`).
+The plan classes are in :mod:`rig.config.plan_types`, their parts in
+:mod:`rig.config.plan_settings`; this
 module gathers them. The engine turns a plan into commands
-(:mod:`rig.run_stepped`, :mod:`rig.run_random`); the plan objects only describe.
+(:mod:`rig.procedures.stepped_sine`, :mod:`rig.procedures.random_test`); the plan objects only
+describe.
 
 File layout of a stepped-sine plan (every table optional except ``excitation`` and
 ``frequencies``; defaults as in the dataclasses)::
@@ -39,12 +42,13 @@ File layout of a stepped-sine plan (every table optional except ``excitation`` a
 
 from __future__ import annotations
 
-from rig.plan_files import builtin_plans, describe_plan, load_plan, plan_from_dict
-from rig.plan_settings import (
+from rig.config.plan_files import builtin_plans, describe_plan, load_plan, plan_from_dict
+from rig.config.plan_settings import (
     DIRECTIONS,
     MAX_PLAN_STEPS,
     AcquisitionSettings,
     ControlPolicy,
+    ControlSettings,
     ExcitationSettings,
     FrequencyPlan,
     FrequencyRange,
@@ -55,8 +59,8 @@ from rig.plan_settings import (
     RandomExcitation,
     ResponseLimit,
 )
-from rig.plan_types import Plan, PlannedStep, RandomPlan, SteppedSinePlan
-from rig.tomlconfig import ConfigError
+from rig.config.plan_types import Plan, PlannedStep, RandomPlan, SteppedSinePlan
+from rig.config.tomlconfig import ConfigError
 
 __all__ = [
     "DIRECTIONS",
@@ -65,6 +69,7 @@ __all__ = [
     "AcquisitionSettings",
     "ConfigError",
     "ControlPolicy",
+    "ControlSettings",
     "ExcitationSettings",
     "FrequencyPlan",
     "FrequencyRange",

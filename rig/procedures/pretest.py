@@ -1,12 +1,13 @@
 """Checks before a test: noise floor, low-level loop check, channel sanity.
 
-The pretest is procedure code (it yields :mod:`rig.commands`), run by the engine at the start
+The pretest is procedure code (it yields :mod:`rig.run.commands`), run by the engine at the start
 of a plan:
 
 1. **noise floor**: the drive at 0 V, every channel recorded; its standard deviation is the
    channel's noise floor (a channel with every sample equal is *flat*: dead sensor or input);
 2. **loop check** (stepped sine): every order driven at a low voltage; the force phasors give the
-   drive-to-force gain that starts the force controller (:func:`rig.control.loop_check_gain`),
+   drive-to-force gain that starts the force controller
+   (:func:`rig.procedures.force_control.loop_check_gain`),
    and every channel must respond above its noise (``min_snr`` standard errors), otherwise it is
    reported by name as not responding (disconnected sensor, IEPE open circuit);
 3. for a random test, the calibration record plays the loop check's part
@@ -27,10 +28,10 @@ from typing import Any
 
 import numpy as np
 
-from rig.commands import Acquire, Measurement, Notify, RunContext, SetDrive
-from rig.control.force_controller import loop_check_gain
-from rig.events import PretestFinished
-from rig.plans import PretestSettings, SteppedSinePlan
+from rig.config.plans import PretestSettings, SteppedSinePlan
+from rig.procedures.force_control import loop_check_gain
+from rig.run.commands import Acquire, Measurement, Notify, RunContext, SetDrive
+from rig.run.events import PretestFinished
 
 __all__ = [
     "ChannelCheck",
@@ -315,7 +316,7 @@ def band_rms(x: np.ndarray, fs: float, band_hz: tuple[float, float]) -> np.ndarr
 
 def pretest_procedure(plan: SteppedSinePlan):
     """The pretest of a stepped-sine plan alone: noise floor, loop check, channel checks, at the
-    frequency the plan's run would use (:func:`rig.pretest.stepped_pretest`)."""
+    frequency the plan's run would use (:func:`rig.procedures.pretest.stepped_pretest`)."""
 
     def procedure(ctx):
         f0 = plan.pretest.loop_check_frequency_hz or plan.steps()[0].frequency_hz

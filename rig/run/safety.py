@@ -3,7 +3,8 @@
 :class:`SignalChecks` is what the engine runs on the data as they arrive:
 
 - input range: a sample at a channel's ADC range means the channel clipped (fault ``clipping``);
-- response limits (:class:`rig.plans.ResponseLimit`): peak acceleration or force of every block,
+- response limits (:class:`rig.config.plans.ResponseLimit`): peak acceleration or force of every
+block,
   and peak displacement (acceleration integrated twice over the excited band); an alarm warns
   once per step, an abort ends the run (fault ``response-limit``);
 - after each averaged measurement: a flat channel (every sample equal) or one whose fundamental
@@ -36,8 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rig.faults import RunFault
-from rig.plans import Limits
+from rig.config.plans import Limits
+from rig.run.faults import RunFault
 
 __all__ = [
     "ResolvedLimit",
@@ -243,7 +244,7 @@ class SignalChecks:
 
     Parameters
     ----------
-    channels : sequence of rig.setup.ChannelSetup
+    channels : sequence of rig.config.setup.ChannelSetup
         Acquired channels in column order.
     limits : Limits
     sample_rate_hz : float

@@ -1,6 +1,6 @@
 """A plan run without hardware: the commands its procedure gives and how long they take.
 
-:class:`ModelPlant` answers a procedure's commands (:mod:`rig.commands`) from a linear model
+:class:`ModelPlant` answers a procedure's commands (:mod:`rig.run.commands`) from a linear model
 plant instead of a DAQ: the drive force is ``G_k(f) V_k`` per order (plus an optional coupling
 of the fundamental into the other orders) and every response channel reads twice the force.
 The procedure does everything it does on the rig (pretest, force control, records, writes),
@@ -22,7 +22,10 @@ from fractions import Fraction
 
 import numpy as np
 
-from rig.commands import (
+from rig.config.plans import Plan, RandomPlan
+from rig.config.setup import LabSetup, load_setup
+from rig.estimation.harmonics import HarmonicEstimate
+from rig.run.commands import (
     Acquire,
     AcquireRecords,
     BeginStep,
@@ -38,9 +41,6 @@ from rig.commands import (
     WriteRandom,
     WriteStep,
 )
-from rig.estimation.harmonics import HarmonicEstimate
-from rig.plans import Plan, RandomPlan
-from rig.setup import LabSetup, load_setup
 from rig.signals.multisine import PeriodPlan, plan_period
 
 __all__ = ["DryRun", "ModelPlant", "dry_run", "flat_gain"]
@@ -230,7 +230,7 @@ def dry_run(plan: Plan, setup: LabSetup | None = None) -> DryRun:
     if isinstance(plan, RandomPlan):
         seconds = plan.n_steps * plan.excitation.record_s
         return DryRun(plan, 1, plan.n_steps, seconds, plan.excitation.record_s)
-    from rig.run_stepped import stepped_sine_procedure
+    from rig.procedures.stepped_sine import stepped_sine_procedure
 
     channels = setup.channels_for_points(plan.points)
     force = [c.role for c in channels].index("drive-force")

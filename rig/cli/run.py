@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from analysis.progress import ProgressReporter, format_duration, time_left
-from rig.events import (
+from rig.run.events import (
     Event,
     FaultRaised,
     PretestFinished,
@@ -155,7 +155,7 @@ def _backend_options(args, setup) -> dict[str, Any]:
 
 def _sim_faults(args, setup) -> list:
     """The ``--fault`` arguments, parsed and checked against the setup's channels."""
-    from rig.faults import parse_sim_fault
+    from rig.run.faults import parse_sim_fault
 
     faults = []
     names = [c.name for c in setup.channels]
@@ -175,8 +175,8 @@ def _sim_faults(args, setup) -> list:
 
 def _schedule_faults(backend, bus, faults) -> None:
     """Switch each fault on in the simulated DAQ from its step of the run on."""
-    from rig.events import StepFinished
-    from rig.faults import switch_on
+    from rig.run.events import StepFinished
+    from rig.run.faults import switch_on
 
     def due(step: int) -> list:
         return [f for f in faults if f.from_step == step]
@@ -195,10 +195,10 @@ def _schedule_faults(backend, bus, faults) -> None:
 
 
 def _run(args, kind: str) -> int:
-    from rig.plans import load_plan
-    from rig.runner import RunSession, open_rig
-    from rig.safety import interrupt_handlers
-    from rig.setup import load_setup
+    from rig.config.plans import load_plan
+    from rig.config.setup import load_setup
+    from rig.run.safety import interrupt_handlers
+    from rig.run.session import RunSession, open_rig
 
     resume = getattr(args, "resume", None)
     plan = load_plan(args.plan) if args.plan else None
@@ -208,7 +208,7 @@ def _run(args, kind: str) -> int:
     setup = load_setup(args.setup) if args.setup else None
     if resume:
         from analysis.measurement_file import read_measurement
-        from rig.setup import setup_from_dict
+        from rig.config.setup import setup_from_dict
 
         stored = read_measurement(resume)
         setup = setup or setup_from_dict(stored.setup, f"setup stored in {resume}")
@@ -278,7 +278,7 @@ def cmd_linear(args) -> int:
 
 
 def cmd_export_uff(args) -> int:
-    from rig.export_uff import export_uff
+    from rig.export.uff import export_uff
 
     n = export_uff(args.file, args.uff, overwrite=args.overwrite)
     if args.json:
@@ -289,7 +289,7 @@ def cmd_export_uff(args) -> int:
 
 
 def cmd_plans(args) -> int:
-    from rig.plans import builtin_plans, describe_plan, load_plan
+    from rig.config.plans import builtin_plans, describe_plan, load_plan
 
     if getattr(args, "plans_command", None) == "show":
         return _show_plan(args)
@@ -308,9 +308,9 @@ def cmd_plans(args) -> int:
 def _show_plan(args) -> int:
     """``rig plans show PLAN``: the plan's steps and the time they take, from a dry run."""
     from analysis.progress import format_duration
-    from rig.dry_run import dry_run
-    from rig.plans import SteppedSinePlan, describe_plan, load_plan
-    from rig.setup import load_setup
+    from rig.config.plans import SteppedSinePlan, describe_plan, load_plan
+    from rig.config.setup import load_setup
+    from rig.run.dry_run import dry_run
 
     plan = load_plan(args.plan)
     setup = load_setup(args.setup) if args.setup else None

@@ -1,11 +1,11 @@
 """The random-excitation procedure of the linear test: H1 and coherence of every channel.
 
-:func:`random_procedure` turns a :class:`~rig.plans.RandomPlan` into commands:
+:func:`random_procedure` turns a :class:`~rig.config.plans.RandomPlan` into commands:
 
 1. noise floor: one record at 0 V;
 2. calibration: a short record at ``calibration_drive_rms_v`` measures the force per volt (the
    test is linear, so the drive that gives ``force_rms_n`` follows by scaling) and checks that
-   every channel responds (:func:`rig.pretest.check_random_response`);
+   every channel responds (:func:`rig.procedures.pretest.check_random_response`);
 3. the test: the band-limited random record at the scaled level, regenerated; ``settle_records``
    discarded, ``average_records`` acquired; every block checked against the limits (the tip's
    displacement against the gap);
@@ -21,12 +21,12 @@ from collections.abc import Generator
 import numpy as np
 
 from analysis.measurement_file import RandomFRF
-from rig.commands import AcquireRecords, Notify, RunContext, SetWaveform, Warn, WriteRandom
+from rig.config.plans import RandomPlan
 from rig.estimation.frf import h1_frf, periodic_frf, welch_average_count
-from rig.events import PretestFinished
-from rig.faults import RunFault
-from rig.plans import RandomPlan
-from rig.pretest import band_rms, check_random_response
+from rig.procedures.pretest import band_rms, check_random_response
+from rig.run.commands import AcquireRecords, Notify, RunContext, SetWaveform, Warn, WriteRandom
+from rig.run.events import PretestFinished
+from rig.run.faults import RunFault
 from rig.signals.random import band_limited_random
 
 __all__ = ["LOW_COHERENCE", "random_procedure"]

@@ -1,6 +1,7 @@
 """The commands a procedure yields to the engine, and what the engine sends back.
 
-A procedure (:mod:`rig.run_stepped`, :mod:`rig.run_random`, :mod:`rig.pretest`) is a generator:
+A procedure (:mod:`rig.procedures.stepped_sine`, :mod:`rig.procedures.random_test`,
+:mod:`rig.procedures.pretest`) is a generator:
 it yields a command, the engine executes it against the backend and sends the result back in::
 
     applied = yield SetDrive(25.0, drive_v, orders)      # -> DriveApplied
@@ -63,7 +64,7 @@ class RunContext:
     ----------
     sample_rate_hz : float
         Realised sample rate of the backend [Hz].
-    channels : tuple of rig.setup.ChannelSetup
+    channels : tuple of rig.config.setup.ChannelSetup
         Acquired channels, in column order of every phasor and sample array.
     drive_force_index : int
         Column of the drive-force channel.
@@ -299,7 +300,7 @@ class BeginStep:
 
     Attributes
     ----------
-    step : rig.plans.PlannedStep
+    step : rig.config.plans.PlannedStep
     n_steps : int
     """
 
@@ -314,7 +315,7 @@ class WriteStep:
     Attributes
     ----------
     record : analysis.measurement_file.StepRecord
-    control : rig.control.StepControlRecord, optional
+    control : rig.procedures.force_control.StepControlRecord, optional
     samples : ndarray, shape (n, C), optional
         Raw time data of the averaged blocks (stored when the file has ``/raw``).
     t0_s : float
@@ -338,7 +339,7 @@ class WriteRandom:
 
 @dataclass(frozen=True)
 class Notify:
-    """Publish an event (:mod:`rig.events`)."""
+    """Publish an event (:mod:`rig.run.events`)."""
 
     event: Any
 

@@ -1,6 +1,7 @@
 """The stepped multi-sine procedure: force-controlled steps, each written as it completes.
 
-:func:`stepped_sine_procedure` turns a :class:`~rig.plans.SteppedSinePlan` into commands for the
+:func:`stepped_sine_procedure` turns a :class:`~rig.config.plans.SteppedSinePlan` into commands for
+the
 engine. For every planned step (levels in plan order, each swept over its frequencies):
 
 1. ``BeginStep`` (a pause/abort checkpoint);
@@ -33,7 +34,12 @@ from collections.abc import Generator, Iterable, Mapping
 import numpy as np
 
 from analysis.measurement_file import StepRecord
-from rig.commands import (
+from rig.config.plans import PlannedStep, SteppedSinePlan
+from rig.estimation.harmonics import pool_estimates
+from rig.procedures.force_control import ControlSettings, ForceController, StepControlRecord
+from rig.procedures.gain_prediction import GainHistory
+from rig.procedures.pretest import stepped_pretest
+from rig.run.commands import (
     Acquire,
     BeginStep,
     Measurement,
@@ -43,13 +49,8 @@ from rig.commands import (
     Warn,
     WriteStep,
 )
-from rig.control.force_controller import ControlSettings, ForceController, StepControlRecord
-from rig.estimation.harmonics import pool_estimates
-from rig.events import ControlIteration, PretestFinished
-from rig.faults import RunFault
-from rig.gain_prediction import GainHistory
-from rig.plans import PlannedStep, SteppedSinePlan
-from rig.pretest import stepped_pretest
+from rig.run.events import ControlIteration, PretestFinished
+from rig.run.faults import RunFault
 from rig.signals.multisine import plan_period
 
 __all__ = ["combine_measurements", "on_target", "stepped_sine_procedure"]
@@ -93,7 +94,7 @@ def stepped_sine_procedure(
         pretest must be enabled).
     recorded : mapping of int to (drive, force), optional
         Drive and force phasors (H,) of steps on disk, by plan index: a resumed run predicts
-        its starting gains from them (:class:`rig.gain_prediction.GainHistory`).
+        its starting gains from them (:class:`rig.procedures.gain_prediction.GainHistory`).
     """
     done = frozenset(int(i) for i in completed)
     seen = dict(recorded or {})

@@ -2,7 +2,7 @@
 
 A setup describes what is on the bench (which sensor sits where, with which sensitivity,
 serial number and calibration date; the DAQ's clock and channels; the amplifier's serial port);
-a plan (:mod:`rig.plans`) says what to do with it and names the setup it expects. Setups are
+a plan (:mod:`rig.config.plans`) says what to do with it and names the setup it expects. Setups are
 TOML files; the built-in ``reference`` setup (``rig/setups/reference.toml``) is the paper's rig.
 Every setting is a frozen dataclass validated on construction; loading a file reports the file
 and the key of any problem.
@@ -43,7 +43,7 @@ from typing import Any
 
 from analysis.measurement_file import Actuator, ChannelInfo
 from rig.backends.protocol import AcquisitionConfig, AIChannelConfig, AOChannelConfig
-from rig.tomlconfig import ConfigError, Table, read_toml
+from rig.config.tomlconfig import ConfigError, Table, read_toml
 
 __all__ = [
     "AmplifierSetup",
@@ -102,7 +102,7 @@ class ChannelSetup:
     output_swing_v : float
         The sensor's output swing [V] from its data sheet (a 10 mV/g accelerometer rated
         +-500 g swings +-5 V); 0 when not known, the input range is then taken to hold it. The
-        saturation check (:mod:`rig.safety`) judges a flat-topped waveform against the smaller
+        saturation check (:mod:`rig.run.safety`) judges a flat-topped waveform against the smaller
         of the two.
     role : {"drive-force", "drive-acceleration", "response", "reference"}
         ``drive-force``: the force gauge at the drive point (exactly one per setup).

@@ -1,6 +1,7 @@
 """Reading validated settings from TOML tables: typed getters whose errors name the key.
 
-Lab setups (:mod:`rig.setup`) and test plans (:mod:`rig.plans`) are TOML files turned into frozen
+Lab setups (:mod:`rig.config.setup`) and test plans (:mod:`rig.config.plans`) are TOML files turned
+into frozen
 dataclasses. :class:`Table` wraps one TOML table with the path of keys that leads to it, hands
 out typed values, and refuses keys nobody asked for (a misspelt key is an error, not a silently
 ignored setting). Every error is a :class:`ConfigError` whose message starts with the source
