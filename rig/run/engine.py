@@ -1,9 +1,11 @@
 """The run engine: executes a procedure's commands on a DAQ backend, safely.
 
 A procedure (a generator of :mod:`rig.run.commands`) decides what to do; the engine does it:
-synthesises and writes drive waveforms, reads the inputs in phase-synchronous blocks, runs the
-settling test, checks every block against the limits (:mod:`rig.run.safety`), writes completed
-steps through a sink (the measurement file), and publishes events (:mod:`rig.run.events`).
+writes drive waveforms, reads the inputs in phase-synchronous blocks, checks every block
+against the limits (:mod:`rig.run.safety`), writes completed steps through a sink (the
+measurement file), and publishes events (:mod:`rig.run.events`). The numbers in between
+(synthesis, harmonic estimation, the settling test) are :mod:`rig.run.acquisition`'s. Further
+commands are added with :meth:`RunEngine.register_command`.
 
 Whatever way the run ends, the engine ramps the output to 0 V (the backend's ``stop()``) and
 mutes the amplifier if it controls one: on success, on an abort (the operator, a signal, an
@@ -37,8 +39,15 @@ import numpy as np
 
 from rig.backends.protocol import BackendError, DaqBackend, ReadTimeoutError
 from rig.config.plans import Limits
-from rig.estimation.harmonics import estimate_harmonics, period_aligned_offset
-from rig.estimation.settling import SettlingCriteria, check_settling
+from rig.run.acquisition import (
+    Output,
+    drive_output,
+    estimate_window,
+    first_sample,
+    settling_test,
+    silent_output,
+    waveform_output,
+)
 from rig.run.commands import (
     Acquire,
     AcquireRecords,
@@ -69,7 +78,6 @@ from rig.run.events import (
 )
 from rig.run.faults import RunAborted, RunFault
 from rig.run.safety import SignalChecks, deferred_interrupts
-from rig.signals.multisine import PeriodPlan, plan_period, synthesize
 
 __all__ = ["RunEngine", "RunOutcome", "StepSink"]
 
@@ -125,18 +133,6 @@ class _Restart(Exception):
 
 class _ProcedureError(Exception):
     """An exception raised by procedure code (not by the engine)."""
-
-
-@dataclass
-class _Output:
-    """The waveform in force."""
-
-    wave: np.ndarray
-    samples_per_period: int
-    steady_index: int
-    band_hz: tuple[float, float] | None
-    period: PeriodPlan | None = None
-    drive_v: np.ndarray | None = None
 
 
 class RunEngine:
@@ -202,11 +198,12 @@ class RunEngine:
         self._samples_read = 0
         self._steps_written = 0
         self._driven = False  # a non-zero output was written (so there was a ramp down)
-        self._output: _Output | None = None
+        self._output: Output | None = None
         self._checks: SignalChecks | None = None
         self._sink: Any = None
         self._amp_warned = False
         self._mute_error = ""
+        self._handlers: dict[type, Callable[[RunEngine, Any], Any]] = dict(self._HANDLERS)
 
     # ------------------------------------------------------------------ control (any thread)
     @property
@@ -337,10 +334,10 @@ class RunEngine:
         config = self.setup.acquisition_config(self.channels, self.sample_rate_hz)
         self._fs = float(self.backend.configure(config))
         self._checks = SignalChecks(self.channels, self.limits, self._fs, self._warn)
-        zero = np.zeros(max(1, int(round(self._fs / 100.0))))
+        zero = silent_output(self._fs)
         steady = int(self.backend.write_periodic(zero, 0.0))
         self.backend.start()
-        self._output = _Output(zero, zero.size, steady, None)
+        self._output = Output(zero, zero.size, steady, None)
         self._cursor = 0
         return RunContext(self._fs, self.channels, self._force_col, self._drive_limit_v)
 
@@ -385,41 +382,57 @@ class RunEngine:
 
     # ------------------------------------------------------------------ commands
     def _execute(self, command: Any) -> Any:
-        handler = self._HANDLERS.get(type(command))
+        handler = self._handlers.get(type(command))
         if handler is None:
             raise TypeError(f"the engine does not know the command {command!r}")
         return handler(self, command)
 
+    def register_command(
+        self, command_type: type, handler: Callable[[RunEngine, Any], Any]
+    ) -> None:
+        """Let procedures yield commands of ``command_type``.
+
+        The engine calls ``handler(engine, command)`` between its abort and pause checks and
+        sends the return value back into the procedure; an exception from the handler ends the
+        run like one from the engine's own commands (a :class:`~rig.run.faults.RunFault` as
+        that fault), with the output ramped to 0 V. A command type is registered once: the
+        built-in commands (:mod:`rig.run.commands`) cannot be replaced.
+        """
+        if not isinstance(command_type, type):
+            raise TypeError(f"register_command: expected a class, got {command_type!r}")
+        if not callable(handler):
+            raise TypeError(
+                f"register_command: the handler of {command_type.__name__} is not callable"
+            )
+        if command_type in self._handlers:
+            raise ValueError(f"register_command: {command_type.__name__} is already registered")
+        self._handlers[command_type] = handler
+
     def _set_drive(self, cmd: SetDrive) -> DriveApplied:
-        period = plan_period(cmd.frequency_hz, self._fs, cmd.orders)
-        drive = np.asarray(cmd.drive_v, dtype=complex)
         try:
-            wave = synthesize(drive, period, limit_v=self._drive_limit_v)
+            out, wave = drive_output(cmd, self._fs, self._drive_limit_v)
         except ValueError as exc:
             raise RunFault(
                 "drive-limit",
                 f"the drive needed ({exc}) exceeds the drive limit {self._drive_limit_v:g} V"
                 f"{self._where()}",
             ) from exc
-        f = period.frequencies_hz
-        band = (0.5 * float(f.min()), 1.5 * float(f.max()))
-        steady = self._write(wave, cmd.ramp_s)
-        self._output = _Output(wave, period.samples_per_period, steady, band, period, drive)
-        return DriveApplied(period, steady, drive)
+        out.steady_index = self._write(wave, cmd.ramp_s)
+        self._output = out
+        return DriveApplied(out.period, out.steady_index, out.drive_v)
 
     def _set_waveform(self, cmd: SetWaveform) -> WaveformApplied:
-        wave = np.asarray(cmd.period_v, dtype=float)
-        peak = float(np.max(np.abs(wave))) if wave.size else 0.0
+        out = waveform_output(cmd)
+        peak = float(np.max(np.abs(out.wave))) if out.wave.size else 0.0
         if peak > self._drive_limit_v:
             raise RunFault(
                 "drive-limit",
                 f"the {cmd.label or 'drive'} waveform peaks at {peak:.4g} V, above the drive "
                 f"limit {self._drive_limit_v:g} V",
             )
-        steady = self._write(wave, cmd.ramp_s)
-        lo_hz, hi_hz = cmd.band_hz
-        self._output = _Output(wave, wave.size, steady, (float(lo_hz), float(hi_hz)))
-        return WaveformApplied(wave.size, steady, peak)
+        out.steady_index = self._write(out.wave, cmd.ramp_s)
+        self._output = out
+        return WaveformApplied(out.samples_per_period, out.steady_index, peak)
 
     def _write(self, wave: np.ndarray, ramp_s: float) -> int:
         self._driven = self._driven or bool(np.any(wave))
@@ -476,10 +489,7 @@ class RunEngine:
             raise RuntimeError("Acquire: no multi-sine drive in force (yield SetDrive first)")
         n = out.samples_per_period
         block = cmd.block_periods * n
-        start = out.steady_index + cmd.settle_periods * n
-        if self._cursor > start:
-            start = self._cursor + period_aligned_offset(self._cursor, out.steady_index, n)
-        self._skip_to(start, n, out.band_hz)
+        self._skip_to(first_sample(out, self._cursor, cmd.settle_periods), n, out.band_hz)
         orders = out.period.orders
         f = out.period.fundamental_hz
         blocks: deque[np.ndarray] = deque(maxlen=cmd.blocks)
@@ -489,14 +499,11 @@ class RunEngine:
             if len(blocks) < cmd.blocks:
                 continue
             window = np.concatenate(blocks)
-            est = estimate_harmonics(
-                window, self._fs, f, (*orders, *cmd.extra_orders), cmd.block_periods
-            )
-            est, extra = est.split(len(orders)) if cmd.extra_orders else (est, None)
+            est, extra = estimate_window(window, self._fs, out, cmd)
             waited = (self._cursor - window.shape[0] - out.steady_index) // n
             if cmd.max_settle_periods is None:
                 break
-            settled, message = _settling(est, orders, cmd)
+            settled, message = settling_test(est, orders, cmd)
             if settled:
                 break
             if waited >= cmd.max_settle_periods:
@@ -537,9 +544,7 @@ class RunEngine:
     def _acquire_records_once(self, cmd: AcquireRecords) -> Records:
         out = self._output
         n = out.samples_per_period
-        start = out.steady_index + cmd.settle_records * n
-        if self._cursor > start:
-            start = self._cursor + period_aligned_offset(self._cursor, out.steady_index, n)
+        start = first_sample(out, self._cursor, cmd.settle_records)
         self._skip_to(start, n, out.band_hz)
         records = []
         for i in range(cmd.records):
@@ -663,25 +668,3 @@ class RunEngine:
         Notify: _notify,
         Warn: _warn_cmd,
     }
-
-
-def _settling(est, orders, cmd: Acquire) -> tuple[bool, str]:
-    """Settling test on an averaging window: block-to-block changes and drift of the halves."""
-    bp = est.block_phasors
-    n_blocks = bp.shape[0]
-    crit = SettlingCriteria(relative_tolerance=cmd.settling_tolerance, consecutive_blocks=2)
-    verdict = check_settling(bp, orders, crit)
-    if not (verdict.settled and verdict.settled_from_block == 0):
-        return False, verdict.message
-    i1 = list(orders).index(Fraction(1)) if Fraction(1) in orders else 0
-    half = n_blocks // 2
-    x = bp[:, :, i1]
-    first, last = x[:half].mean(axis=0), x[-half:].mean(axis=0)
-    scatter = np.sqrt(np.sum(np.abs(x - x.mean(axis=0)) ** 2, axis=0) / max(n_blocks - 1, 1))
-    tol = np.maximum(
-        cmd.drift_tolerance * np.abs(x.mean(axis=0)), 3.0 * scatter * np.sqrt(2.0 / half)
-    )
-    ratio = np.abs(last - first) / np.maximum(tol, np.finfo(float).tiny)
-    if np.any(ratio > 1.0):
-        return False, f"drifting: the halves of the window differ by {ratio.max():.3g} x tolerance"
-    return True, verdict.message
