@@ -173,6 +173,18 @@ def run_gui(
         window.tabs.setCurrentWidget(window.browser)
     if model:
         window.workbench.open_model(model)
-    window.resize(1600, 1000)
+    _fit_to_screen(window, app)
     window.show()
     return app.exec()
+
+
+def _fit_to_screen(window, app, preferred=(1600, 1000)) -> None:
+    """Open at the preferred size or the screen's free area, whichever is smaller: a window
+    larger than a laptop's or a lab PC's screen hides its right column (the run's status and
+    the higher orders' plots) with no way to see them but to maximise it."""
+    screen = app.primaryScreen()
+    if screen is None:
+        window.resize(*preferred)
+        return
+    free = screen.availableGeometry()
+    window.resize(min(preferred[0], free.width()), min(preferred[1], free.height()))

@@ -135,8 +135,10 @@ class BackendBox(QtWidgets.QWidget):
         self.new_file.setToolTip("a new, unused file name next to this one")
         self.new_file.clicked.connect(self.use_new_file)
         self.overwrite = QtWidgets.QCheckBox("replace an existing file")
-        self.pause_on_fault = QtWidgets.QCheckBox(
-            "pause on recoverable faults (clipping, silent sensor, lost force, amplifier overload)"
+        self.pause_on_fault = QtWidgets.QCheckBox("pause on recoverable faults")
+        self.pause_on_fault.setToolTip(
+            "clipping, a silent sensor, lost force or an amplifier overload pause the run "
+            "(output ramped to 0 V) instead of ending it; fix the cause and resume"
         )
         self.pause_on_fault.setChecked(True)
         self.resume_note = QtWidgets.QLabel("")
