@@ -75,25 +75,19 @@ log = logging.getLogger(__name__)
 
 #: The hidden effect of each truth as a candidate: (kind, location, side).
 TRUE_EFFECTS = {
-    "hardening_mounts": ("cubic_spring", "mounts", None),
+    "hardening_mounts": ("cubic_spring", "springs k_mount", None),
     "clamp_friction": ("coulomb_friction", "joint clamp rz", None),
     "two_sided_stop": ("hertz_contact", "point 7", 1),
     "damper_p5": ("quadratic_damper", "point 5", None),
     "mass_loading": ("mass", "point 6", None),
-    # Located effects: one spring of the mounts' group, a beam point no sensor is at, a stop
-    # between the tip and the frame (between two nodes: at, to), a damper whose neighbours
-    # tie with it in the paper's band (the second bending mode separates them: its truth file;
-    # the one mount likewise ties with the group, which the suspension modes separate). Names
-    # of places the candidates lack are proposals: "spring NAME" for one spring of the model,
-    # "point N to NODE DIRECTION" for an element between a point's DOF and another.
+    # One spring of the mounts' group, a beam point no sensor is at, a stop between the tip
+    # and the frame (between two nodes), a damper whose neighbours tie with it in the paper's
+    # band (the second bending mode separates them: its truth file).
     "one_mount_hardens": ("cubic_spring", "spring mount_right_y", None),
     "stop_above_p5": ("hertz_contact", "point 5", 1),
     "tip_to_frame_stop": ("hertz_contact", "point 7 to right_top y", 1),
     "damper_p4": ("quadratic_damper", "point 4", None),
 }
-#: Effects at locations that the default candidates do not hold yet (a single spring of a
-#: group, an element between two nodes).
-BEYOND_DEFAULT_LOCATIONS = ("one_mount_hardens", "tip_to_frame_stop")
 NEGATIVE_CONTROLS = ("reference", "hysteretic_joint")
 #: Highest order of the force the controller holds (at zero beyond the excited ones).
 HELD_ORDERS = 8

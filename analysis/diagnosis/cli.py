@@ -22,6 +22,7 @@ from analysis.diagnosis.candidates import default_candidates
 from analysis.diagnosis.compare import compare, uncalibrated_note
 from analysis.diagnosis.diagnose import diagnose
 from analysis.diagnosis.result import DiagnosisSettings
+from analysis.diagnosis.separate import write_separating_plan
 from analysis.logs import add_debug_option, configure_logging, note_inputs, summarise_repeats
 from analysis.measurement_file import SteppedSineData, read_measurement, require_steps
 from analysis.model import load_model
@@ -144,7 +145,21 @@ def cmd_diagnose(args) -> dict:
     if not args.json:
         print(result.summary())
         print(f"({result.timings.get('total_s', 0):.1f} s)")
-    return result.to_json()
+    out = result.to_json()
+    if args.separate_plan:
+        out["separate_plan"] = _write_separate_plan(args.separate_plan, result, data)
+    return out
+
+
+def _write_separate_plan(path: str, result, data) -> str | None:
+    """Write the measurement separating a tie as a plan file; say so when there is no tie."""
+    if not result.recommendation:
+        reason = "no tie" if len(result.group) < 2 else "no configuration separates the tie"
+        print(f"note: no separating plan written ({reason})", file=sys.stderr)
+        return None
+    written = write_separating_plan(path, result.recommendation, data)
+    print(f"separating plan written to {written}", file=sys.stderr)
+    return str(written)
 
 
 def cmd_augment(args) -> dict:
@@ -242,6 +257,11 @@ def add_parsers(subparsers) -> None:
     sp.add_argument("--linear-run", help="random-excitation test (for linear candidates)")
     sp.add_argument("--starts", type=int, default=4, help="extra starts for strong effects")
     sp.add_argument("--workers", type=int, default=2, help="processes for verifications")
+    sp.add_argument(
+        "--separate-plan",
+        metavar="PLAN.toml",
+        help="on a tie, write the measurement that separates it as a rig plan file",
+    )
     rescreen(sp)
     sp.set_defaults(func=cmd_diagnose)
 

@@ -7,12 +7,12 @@ from fractions import Fraction
 import pytest
 
 from benchmarks.diagnose import (
-    BEYOND_DEFAULT_LOCATIONS,
     TRUE_EFFECTS,
     benchmark_plan,
     cache_dir,
     record_blocks,
 )
+from tests.analysis.diagnosis.conftest import truth_as_model
 
 
 def test_the_plan_is_the_papers_with_the_force_held_clean() -> None:
@@ -37,8 +37,19 @@ def test_every_hidden_effect_names_a_library_candidate(
         for c in default_candidates(reference_model)
     }
     for truth, effect in TRUE_EFFECTS.items():
-        # a location the candidates gain is to leave this list (and the list must be right)
-        assert (effect in labels) == (truth not in BEYOND_DEFAULT_LOCATIONS), truth
+        assert effect in labels, truth
+    # the names are the places the truths put their effects at
+    places = {c.location.name: c.location for c in default_candidates(reference_model)}
+    for truth, (kind, where, _) in TRUE_EFFECTS.items():
+        hidden = [s for s in truth_as_model(truth).nonlinear if s.name != "bump_stop"]
+        placed = {
+            (at.node, at.direction, to and (to.node, to.direction))
+            for at, to in places[where].incidences
+        }
+        for spec in hidden:  # none for a mass
+            to = spec.to and (spec.to.node, spec.to.direction)
+            assert (spec.at.node, spec.at.direction, to) in placed, (truth, spec.name)
+            assert spec.kind == kind, truth
     monkeypatch.setenv("CLEARANCE_RIG_CACHE", str(tmp_path))
     assert cache_dir() == tmp_path
 
