@@ -29,6 +29,7 @@ from rig.backends import available_backends, open_backend
 from rig.backends.protocol import BackendError, reference_values
 from rig.cli_run import EXIT_INTERRUPTED, EXIT_USAGE, add_run_commands
 from rig.cli_service import add_service_commands
+from rig.separate import add_separate_command
 
 
 def cmd_backends(args) -> dict:
@@ -128,6 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--json", action="store_true", help="print one JSON object")
     sp.set_defaults(func=cmd_amplifier)
     add_run_commands(sub)
+    add_separate_command(sub)
     add_service_commands(sub)
 
     sp = sub.add_parser(

@@ -70,7 +70,8 @@ def _progress(quiet: bool):
     return show
 
 
-def _stepped(path: str) -> SteppedSineData:
+def read_stepped(path: str) -> SteppedSineData:
+    """The stepped-sine run in ``path`` (a random run or a file without steps refused)."""
     data = read_measurement(path)
     if not isinstance(data, SteppedSineData):
         raise ValueError(f"{path}: a stepped-sine run is needed (this is a random run)")
@@ -95,7 +96,7 @@ def _note_uncalibrated(model) -> None:
 
 def cmd_compare(args) -> dict:
     """Residual blocks of a model against a file; figures with ``--figures``."""
-    model, data = _model(args), _stepped(args.run)
+    model, data = _model(args), read_stepped(args.run)
     pred = BranchMatchedPredictor(model, data, n_harmonics=args.harmonics, n_time=args.samples)
     with summarise_repeats("compare"):
         cmp = compare(model, data, predictor=pred, sigma=args.sigma)
@@ -128,7 +129,7 @@ def _settings(args) -> DiagnosisSettings:
 
 def cmd_diagnose(args) -> dict:
     """Which effect is missing."""
-    model, data = _model(args), _stepped(args.run)
+    model, data = _model(args), read_stepped(args.run)
     _note_uncalibrated(model)
     with summarise_repeats("diagnose"):
         result = diagnose(
@@ -164,7 +165,7 @@ def _write_separate_plan(path: str, result, data) -> str | None:
 
 def cmd_augment(args) -> dict:
     """Add the chosen effect (or the best of a diagnosis), recalibrate, compare."""
-    model, data = _model(args), _stepped(args.run)
+    model, data = _model(args), read_stepped(args.run)
     _note_uncalibrated(model)
     show = _progress(args.json)
     values = known = None

@@ -12,6 +12,7 @@ tests read it back with the rig's own reader.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
@@ -21,7 +22,7 @@ import tomli_w
 
 from analysis.measurement_file import SteppedSineData
 
-__all__ = ["separating_plan", "write_separating_plan"]
+__all__ = ["Separation", "rank_on_separating_run", "separating_plan", "write_separating_plan"]
 
 
 def separating_plan(recommendation: dict, data: SteppedSineData, name: str = "separate") -> dict:
@@ -89,3 +90,89 @@ def write_separating_plan(
     )
     path.write_text(header + tomli_w.dumps(doc))
     return path
+
+
+@dataclass(frozen=True)
+class Separation:
+    """The tied candidates ranked again on the separating run.
+
+    Attributes
+    ----------
+    ranking : list of dict
+        Per candidate, best first: ``label``, ``chi2`` (on the steps every candidate converged
+        at), ``delta_chi2`` (to the best) and ``rms_over_noise``.
+    tie_chi2 : float
+        The candidates within this of the best remain tied.
+    """
+
+    ranking: list[dict]
+    tie_chi2: float
+
+    @property
+    def tied(self) -> list[str]:
+        """The labels still tied with the best (the best alone when the run separated them)."""
+        return [r["label"] for r in self.ranking if r["delta_chi2"] <= self.tie_chi2]
+
+    @property
+    def resolved(self) -> bool:
+        return len(self.tied) == 1
+
+    def summary(self) -> str:
+        lines = ["the tied candidates on the separating run (fitted on the first run):"]
+        for r in self.ranking:
+            lines.append(
+                f"  {r['label']}: residual {r['rms_over_noise']:.3g} x noise, "
+                f"delta chi-square {r['delta_chi2']:.1f}"
+            )
+        if self.resolved:
+            lines.append(f"resolved: {self.tied[0]}")
+        else:
+            lines.append(f"still tied within {self.tie_chi2:g}: " + "; ".join(self.tied))
+        return "\n".join(lines)
+
+
+def rank_on_separating_run(group, data: SteppedSineData, tie_chi2: float) -> Separation:
+    """Rank tied candidates by how well each predicts the separating run.
+
+    Each candidate keeps the parameters its verification fitted on the first run, so the
+    second run is a prediction: the difference of two candidates' chi-squares on it is twice
+    their log-likelihood ratio, the scale of the BIC the tie was judged on (no parameter is
+    fitted, so none is charged). Scored on the steps every candidate converged at.
+
+    Parameters
+    ----------
+    group : sequence of RankedCandidate
+        The tied group (:attr:`Diagnosis.group`).
+    data : SteppedSineData
+        The separating run.
+    tie_chi2 : float
+        Candidates within this of the best stay tied (the diagnosis's ``tie_bic``).
+    """
+    from analysis.diagnosis.compare import compare
+    from analysis.model import Model
+
+    if len(group) < 2:
+        raise ValueError("ranking on a separating run needs at least two tied candidates")
+    residuals = []
+    for g in group:
+        model = Model.from_toml_text(g.verified.model_toml, f"<{g.candidate.label}>")
+        residuals.append(compare(model, data).residual)
+    common = np.logical_and.reduce([np.isfinite(r) for r in residuals])
+    if not common.any():
+        raise RuntimeError("no step of the separating run converged for every tied candidate")
+    chi2 = [float((np.abs(r[common]) ** 2).sum()) for r in residuals]
+    best = min(chi2)
+    n = int(common.sum())
+    ranking = sorted(
+        (
+            {
+                "label": g.candidate.label,
+                "chi2": c,
+                "delta_chi2": c - best,
+                "rms_over_noise": float(np.sqrt(c / n)),
+            }
+            for g, c in zip(group, chi2, strict=True)
+        ),
+        key=lambda r: r["chi2"],
+    )
+    return Separation(ranking, tie_chi2)
