@@ -63,3 +63,50 @@ def test_longer_records_are_a_setting(monkeypatch) -> None:
     monkeypatch.setenv("CLEARANCE_RIG_RECORD_BLOCKS", "many")
     with pytest.raises(ValueError, match="CLEARANCE_RIG_RECORD_BLOCKS.*'many'"):
         record_blocks()
+
+
+def test_a_tie_is_settled_by_the_separating_run(tmp_path) -> None:
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from analysis.diagnosis.result import DiagnosisSettings
+    from analysis.measurement_file import read_measurement
+    from benchmarks.diagnose import separate
+
+    reference = truth_as_model("reference")
+    softer = reference.with_values({"E_beam": 0.92 * reference.parameters["E_beam"].value})
+
+    def tied(label, model):
+        return SimpleNamespace(
+            candidate=SimpleNamespace(label=label),
+            verified=SimpleNamespace(model_toml=model.to_toml()),
+        )
+
+    diag = SimpleNamespace(
+        group=[tied("softer beam", softer), tied("the truth", reference)],
+        recommendation={
+            "best": {
+                "sensor": 5,
+                "level_n": 2.0,
+                "start_hz": 23.0,
+                "stop_hz": 24.0,
+                "step_hz": 1.0,
+            },
+            "candidates": ["softer beam", "the truth"],
+        },
+        settings=DiagnosisSettings(),
+    )
+    data = SimpleNamespace(
+        orders=np.array([1, 2, 3]),
+        force_targets=np.array([[2.0, 0.04, 0.04]]),
+        channels=[SimpleNamespace(point=p) for p in (3, 6, 7)],
+    )
+    best, sep, seconds = separate("reference", diag, data, tmp_path)
+    assert best.candidate.label == "the truth" and sep.resolved and seconds > 0
+    # the plan the analysis wrote is the one the rig ran: point 5 recorded
+    assert (tmp_path / "reference-separate.plan.toml").exists()
+    (run,) = tmp_path.glob("reference-separate-*.h5")
+    assert 5 in {ch.point for ch in read_measurement(run).channels}
+    again = separate("reference", diag, data, tmp_path)
+    assert again[2] == 0.0  # the separating run is cached like the others
