@@ -296,7 +296,8 @@ def _class_leaders(fits: list[ScreenFit], where: str) -> list[ScreenFit]:
     """Every law at the best :data:`REFINED_LOCATIONS` locations of kind ``where`` (by their
     best law in the screen's first pass): a first pass can score a law there worse than the
     model itself, but the location an effect sits at stands out under one law or another, so
-    the refinements stay as many as the laws, whatever the size of the structure."""
+    the refinements of a kind stay at that many times the laws, whatever the size of the
+    structure."""
     here = [f for f in fits if f.candidate.location.kind == where]
     order = list(dict.fromkeys(f.candidate.location for f in sorted(here, key=lambda f: f.bic)))
     keep = set(order[:REFINED_LOCATIONS])

@@ -1,4 +1,4 @@
-"""A tie is ordered by the fit: BIC, which charges each parameter, never a rule without data."""
+"""The ranking rules: a tie ordered by the fit, the refinements of each location kind bounded."""
 
 from __future__ import annotations
 
@@ -48,3 +48,25 @@ def test_a_tie_is_ordered_by_bic_not_by_parameter_count() -> None:
     assert [r.candidate.label for r in ranked] == ["three parameters", "one parameter"]
     assert [r.group for r in ranked] == [1, 1]  # still a tie, said to be one
     assert abs((ranked[1].bic - ranked[0].bic) - 4.0) < 1e-6
+
+
+def test_the_refinements_of_a_kind_are_every_law_at_its_best_locations() -> None:
+    from analysis.diagnosis.candidates import Location
+    from analysis.diagnosis.diagnose import REFINED_LOCATIONS, _class_leaders
+
+    def fit(kind: str, where: str, law: str, bic: float):
+        loc = Location(where, kind_=kind)
+        return SimpleNamespace(candidate=SimpleNamespace(location=loc, law=law), bic=bic)
+
+    laws = ("cubic", "contact", "damper")
+    # five springs; each stands out under one law (its best BIC), the others score alike
+    fits = [
+        fit("spring", f"spring {i}", law, -100.0 * i if law == laws[i % 3] else 0.0)
+        for i in range(5)
+        for law in laws
+    ]
+    fits.append(fit("point", "point 7", "cubic", -1e4))  # another kind, never refined here
+    leaders = _class_leaders(fits, "spring")
+    kept = {f.candidate.location.name for f in leaders}
+    assert kept == {f"spring {i}" for i in range(5)[-REFINED_LOCATIONS:]}
+    assert len(leaders) == REFINED_LOCATIONS * len(laws)
