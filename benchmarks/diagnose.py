@@ -26,8 +26,12 @@ Figures (the last JSON line): ``cases`` (per hidden effect: ``truth``, ``true_ef
 (1 = first, or in the first tied group), ``residual_drop`` (residual before over after, root
 of chi-square per degree of freedom on the whole file with its uncertainties) and
 ``final_over_noise``), ``negative_control_claims`` (claims made for ``reference`` and
-``hysteretic_joint``, whose effect is outside the library) and ``total_s`` (calibrations,
-diagnoses and augmentations); per truth the details (``details``) with the times of each part.
+``hysteretic_joint``, whose effect is outside the library), ``candidates`` (per truth, the
+candidates screened: nonlinear and linear), ``ties_resolved`` (per truth whose diagnosis tied:
+the separating plan, written by the analysis and read by the rig, run on the simulated rig,
+and the true effect first alone on the new file; the effect added is then the new file's
+best), ``max_diagnosis_s`` and ``total_s`` (calibrations, diagnoses and augmentations); per
+truth the details (``details``) with the times of each part.
 The machine's speed drifts (the same calibration took up to 45 % longer twenty minutes
 later): just before each diagnosis the paper sweep of :mod:`benchmarks.mhb` is timed
 (``paper_sweep_s``, its range over the cases at the top level), and each diagnosis is also
@@ -75,25 +79,19 @@ log = logging.getLogger(__name__)
 
 #: The hidden effect of each truth as a candidate: (kind, location, side).
 TRUE_EFFECTS = {
-    "hardening_mounts": ("cubic_spring", "mounts", None),
+    "hardening_mounts": ("cubic_spring", "springs k_mount", None),
     "clamp_friction": ("coulomb_friction", "joint clamp rz", None),
     "two_sided_stop": ("hertz_contact", "point 7", 1),
     "damper_p5": ("quadratic_damper", "point 5", None),
     "mass_loading": ("mass", "point 6", None),
-    # Located effects: one spring of the mounts' group, a beam point no sensor is at, a stop
-    # between the tip and the frame (between two nodes: at, to), a damper whose neighbours
-    # tie with it in the paper's band (the second bending mode separates them: its truth file;
-    # the one mount likewise ties with the group, which the suspension modes separate). Names
-    # of places the candidates lack are proposals: "spring NAME" for one spring of the model,
-    # "point N to NODE DIRECTION" for an element between a point's DOF and another.
+    # One spring of the mounts' group, a beam point no sensor is at, a stop between the tip
+    # and the frame (between two nodes), a damper whose neighbours tie with it in the paper's
+    # band (the second bending mode separates them: its truth file).
     "one_mount_hardens": ("cubic_spring", "spring mount_right_y", None),
     "stop_above_p5": ("hertz_contact", "point 5", 1),
     "tip_to_frame_stop": ("hertz_contact", "point 7 to right_top y", 1),
     "damper_p4": ("quadratic_damper", "point 4", None),
 }
-#: Effects at locations that the default candidates do not hold yet (a single spring of a
-#: group, an element between two nodes).
-BEYOND_DEFAULT_LOCATIONS = ("one_mount_hardens", "tip_to_frame_stop")
 NEGATIVE_CONTROLS = ("reference", "hysteretic_joint")
 #: Highest order of the force the controller holds (at zero beyond the excited ones).
 HELD_ORDERS = 8
@@ -189,8 +187,8 @@ RUN_CODE = (
 
 
 #: Command-line front ends and stages that run commands but make no data themselves.
-#: (file names of rig/cli/ and folders of rig/)
-FRONT_ENDS = ("gui", "service", "main.py", "service.py", "workflow.py", "export")
+#: (file names in rig/cli/, folders of rig/)
+FRONT_ENDS = ("gui", "service", "main.py", "service.py", "workflow.py", "separate.py", "export")
 
 
 @functools.cache
@@ -218,13 +216,18 @@ def stepped_run(truth: str, folder: Path, *, quick: bool = False, seed: int = 0)
     seconds : float
         Wall time spent making it (0 when taken from the cache).
     """
+    return simulated_run(truth, benchmark_plan(quick, record_blocks()), folder, seed=seed)
+
+
+def simulated_run(truth: str, plan, folder: Path, *, seed: int = 0, stem: str | None = None):
+    """``plan`` run by the rig's engine on the simulated rig of ``truth`` (made once, then
+    cached under ``stem``, default the truth's name). Returns ``(path, seconds)``."""
     from rig.config.setup import load_setup
     from rig.run.session import TestRun, open_rig
 
-    plan = benchmark_plan(quick, record_blocks())
     text = (TRUTH_DIR / f"{truth}.toml").read_text()
-    key = _key(text, json.dumps(plan.to_dict(), default=str), str(seed), _code_version())
-    path = folder / f"{truth}-{key}.h5"
+    key = _key(text, json.dumps(plan.to_dict(), default=str), str(seed), _code_version(FRONT_ENDS))
+    path = folder / f"{stem or truth}-{key}.h5"
     if path.exists():
         try:
             if read_measurement(path).complete:
@@ -456,6 +459,16 @@ def calibrate_paper_way(stepped: Path, linear: Path, *, n_starts: int = 30, seed
     return fit.model, data
 
 
+def _is_true(c, truth: str) -> bool:
+    """``c`` is the hidden effect of ``truth``."""
+    kind, location, side = TRUE_EFFECTS[truth]
+    return (
+        c.law.kind == kind
+        and c.location.name == location
+        and (side is None or c.law.options.get("side") == side)
+    )
+
+
 def _rank(diag, truth: str) -> int:
     """Rank of the true effect among the verified candidates (then the screened ones)."""
     kind, location, side = TRUE_EFFECTS[truth]
@@ -463,14 +476,28 @@ def _rank(diag, truth: str) -> int:
     if r is not None:
         return r
     for i, f in enumerate(diag.screen):
-        c = f.candidate
-        if (
-            c.law.kind == kind
-            and c.location.name == location
-            and (side is None or c.law.options.get("side") == side)
-        ):
+        if _is_true(f.candidate, truth):
             return len(diag.ranking) + i + 1
     return len(diag.ranking) + len(diag.screen) + 1
+
+
+def separate(truth: str, diag, data, folder: Path, seed: int = 0):
+    """Settle a tie as the rig's ``separate`` command does: the separating plan written by the
+    analysis, read by the rig, run on the simulated rig of ``truth``, the tied candidates
+    ranked on the new file. Returns ``(the best of them, its Separation, seconds of data)``."""
+    from analysis.diagnosis.separate import rank_on_separating_run, write_separating_plan
+    from rig.config.plans import load_plan
+
+    plan_path = write_separating_plan(
+        folder / f"{truth}-separate.plan.toml", diag.recommendation, data
+    )
+    path, seconds = simulated_run(
+        truth, load_plan(plan_path), folder, seed=seed, stem=f"{truth}-separate"
+    )
+    sep = rank_on_separating_run(diag.group, read_measurement(path), diag.settings.tie_bic)
+    print(sep.summary())
+    best = next(g for g in diag.group if g.candidate.label == sep.ranking[0]["label"])
+    return best, sep, seconds
 
 
 def run_case(truth: str, folder: Path, *, quick: bool = False, seed: int = 0) -> dict:
@@ -497,9 +524,17 @@ def run_case(truth: str, folder: Path, *, quick: bool = False, seed: int = 0) ->
     }
     print(f"--- {truth}: {diag.verdict} (diagnosis {t2 - t1:.1f} s)")
     print(diag.summary())
+    out["candidates"] = len(diag.screen) + len(diag.linear)
+    pick = diag.group[0] if diag.group else (diag.ranking[0] if diag.ranking else None)
+    if len(diag.group) > 1 and diag.recommendation:
+        pick, sep, sep_data_s = separate(truth, diag, data, folder, seed)
+        out["data_s"] = round(out["data_s"] + sep_data_s, 1)
+        out["tie_resolved"] = (
+            sep.resolved and truth in TRUE_EFFECTS and _is_true(pick.candidate, truth)
+        )
+        out["after_separation"] = sep.tied
     if truth in TRUE_EFFECTS:
         out["true_effect_rank"] = _rank(diag, truth)
-        pick = diag.group[0] if diag.group else (diag.ranking[0] if diag.ranking else None)
         if pick is not None:
             values, known = pick.start_values()
             res = augment(
@@ -549,6 +584,8 @@ def run(quick: bool = False) -> dict:
         "total_s": round(sum(d["total_s"] for d in details), 1),
         "data_s": round(sum(d["data_s"] for d in details), 1),
         "max_diagnosis_s": max(d["diagnosis_s"] for d in details),
+        "candidates": {d["truth"]: d["candidates"] for d in details},
+        "ties_resolved": {d["truth"]: d["tie_resolved"] for d in details if "tie_resolved" in d},
         "paper_sweep_s": [
             min(d["paper_sweep_s"] for d in details),
             max(d["paper_sweep_s"] for d in details),

@@ -1,8 +1,9 @@
 """Candidate model changes: a law of the element library at a location, or a linear change.
 
-A :class:`Location` is where an effect may act: a measured point's DOF (to ground), a group of
-springs sharing a stiffness parameter (the rubber mounts), a rigid direction of a joint (the
-clamp's rotation, released into a spring) or the whole structure (a linear parameter). A
+A :class:`Location` is where an effect may act, read from the model's structure: a measured
+point in any direction it moves in (to ground), one spring of the model, a group of springs
+sharing a stiffness parameter, a rigid direction of a joint (released into a spring), two nodes
+of different members (an element between them) or the whole structure (a linear parameter). A
 :class:`Law` is one element kind of the library (or a lumped mass, or a linear parameter) with
 its parameters split into those entering linearly (fitted by least squares) and those entering
 nonlinearly (a clearance, refined continuously). A :class:`Candidate` pairs them and knows how
@@ -56,20 +57,25 @@ class Location:
     Attributes
     ----------
     name : str
-        Short label (``"point 5"``, ``"mounts"``, ``"joint clamp rz"``, ``"structure"``).
+        What the place is (``"point 5"``, ``"point 5 x"``, ``"spring mount_right_y"``,
+        ``"springs k_mount"``, ``"joint clamp rz"``, ``"point 7 to right_top y"``,
+        ``"structure"``): :func:`default_locations`.
     incidences : tuple of (DofRef, DofRef or None)
         ``(at, to)`` of each element placed (one law, shared parameters); empty for a linear
         parameter.
     joint : (str, str) or None
         ``(joint name, direction)`` released from rigid to a spring for this location.
     point : int or None
-        The measurement point, for point locations.
+        The measurement point, for point locations (in any direction).
+    kind_ : str
+        The location's kind where its fields alone do not tell it (:attr:`kind`).
     """
 
     name: str
     incidences: tuple[tuple[DofRef, DofRef | None], ...] = ()
     joint: tuple[str, str] | None = None
     point: int | None = None
+    kind_: str = ""
 
     @property
     def slug(self) -> str:
@@ -77,8 +83,13 @@ class Location:
 
     @property
     def kind(self) -> str:
-        """``"point"`` (a measured point), ``"joint"``, ``"group"`` (elements at unmeasured
-        DOFs sharing one law, such as the mounts) or ``"structure"`` (a linear parameter)."""
+        """``"point"`` (a measured point in its measured direction), ``"direction"`` (a
+        measured point in another direction), ``"spring"`` (one spring of the model),
+        ``"group"`` (springs sharing a parameter: one law, its parameters shared), ``"joint"``
+        (a joint direction), ``"pair"`` (between two nodes) or ``"structure"`` (a linear
+        parameter)."""
+        if self.kind_:
+            return self.kind_
         if self.joint is not None:
             return "joint"
         if self.point is not None:
@@ -87,8 +98,9 @@ class Location:
 
     @property
     def unmeasured(self) -> bool:
-        """Acts at DOFs no sensor measures (a joint or a group)."""
-        return self.kind in ("joint", "group")
+        """Acts at DOFs or in directions the point's sensor does not measure (every kind but
+        a point and the structure)."""
+        return self.kind not in ("point", "structure")
 
 
 @dataclass(frozen=True)
@@ -313,33 +325,123 @@ def _add_mass(model: Model, location: Location, param: Parameter) -> Model:
 
 
 # -- the default candidate set -----------------------------------------------------------------
+#: Directions a force law of the library acts in at a point (translations: a moment at a
+#: section of a member comes from a joint, which has locations of its own).
+POINT_DIRECTIONS = ("x", "y")
+
+#: Reach of a relative element, as a fraction of the structure's largest extent: two nodes of
+#: different members this close (a bracket, a limiter, a bolted stop bridging the clearance
+#: between them) may hold an element between them.
+PAIR_REACH = 0.1
+
+
 def default_locations(model: Model) -> list[Location]:
-    """Every measurement point (its DOF to ground), each group of springs sharing a stiffness
-    parameter, and each rigid rotation or transverse direction of a joint."""
+    """Every place of the model's structure an effect may act, named after what it is.
+
+    In order: every measurement point in its measured direction (``"point 7"``) and in every
+    other direction the structure moves there (``"point 7 x"``); every spring on its own
+    (``"spring mount_right_y"``) and every group of springs sharing a stiffness parameter
+    (``"springs k_mount"``); every rigid direction of every joint (``"joint clamp rz"``); and
+    every pair of a measured point's node and a node of another member within
+    :data:`PAIR_REACH` of the structure's extent, in each direction both move in
+    (``"point 7 to right_top y"``, ``"point 12 to right_corner x"``).
+    """
+    asm = model.assemble()
+    moves: dict[str, list[str]] = {}
+    for node, d in asm.dofs:
+        moves.setdefault(node, []).append(d)
     locs = []
     for n, p in model.points.items():
         locs.append(Location(f"point {n}", ((DofRef(p.node, p.direction, n), None),), point=n))
+    for n, p in model.points.items():
+        for d in POINT_DIRECTIONS:
+            if d != p.direction and d in moves.get(p.node, ()):
+                locs.append(
+                    Location(
+                        f"point {n} {d}", ((DofRef(p.node, d), None),), point=n, kind_="direction"
+                    )
+                )
     if model.frame is not None:
-        groups: dict[str, list] = {}
-        for s in model.frame.springs:
-            if isinstance(s.k, str):
-                groups.setdefault(s.k, []).append(s)
-        for pname, springs in groups.items():
-            inc = tuple(
-                (DofRef(s.node, s.direction), None if s.to is None else DofRef(s.to, s.direction))
-                for s in springs
-            )
-            label = "mounts" if "mount" in pname else f"springs {pname}"
-            locs.append(Location(label, inc))
-        for j in model.frame.joints:
-            for d in ("rz", "y"):
-                if j.connection(d) == "rigid":
-                    a, b = j.nodes
+        locs += _spring_locations(model)
+        locs += _joint_locations(model)
+        locs += _pair_locations(model, asm, moves)
+    return locs
+
+
+def _spring_locations(model: Model) -> list[Location]:
+    """Each spring of the frame on its own, then each group sharing a stiffness parameter."""
+    assert model.frame is not None
+    locs = []
+    groups: dict[str, list] = {}
+    for s in model.frame.springs:
+        inc = (DofRef(s.node, s.direction), None if s.to is None else DofRef(s.to, s.direction))
+        locs.append(Location(f"spring {s.name}", (inc,), kind_="spring"))
+        if isinstance(s.k, str):
+            groups.setdefault(s.k, []).append(inc)
+    for pname, incs in groups.items():
+        if len(incs) > 1:
+            locs.append(Location(f"springs {pname}", tuple(incs), kind_="group"))
+    return locs
+
+
+def _joint_locations(model: Model) -> list[Location]:
+    """Each rigid direction of each joint, released into a spring of its own."""
+    assert model.frame is not None
+    locs = []
+    for j in model.frame.joints:
+        for d in ("rz", "y", "x"):
+            if j.connection(d) == "rigid":
+                a, b = j.nodes
+                locs.append(
+                    Location(
+                        f"joint {j.name} {d}", ((DofRef(b, d), DofRef(a, d)),), joint=(j.name, d)
+                    )
+                )
+    return locs
+
+
+def _on_segment(xy, a, b, tol: float) -> bool:
+    (px, py), (ax, ay), (bx, by) = xy, a, b
+    dx, dy = bx - ax, by - ay
+    t = ((px - ax) * dx + (py - ay) * dy) / (dx * dx + dy * dy)
+    if t < -tol or t > 1 + tol:
+        return False
+    return math.hypot(ax + t * dx - px, ay + t * dy - py) <= tol * math.hypot(dx, dy)
+
+
+def _pair_locations(model: Model, asm, moves: Mapping[str, Sequence[str]]) -> list[Location]:
+    """A measured point's node and each named node of another member within reach."""
+    frame = model.frame
+    assert frame is not None
+    xy = frame.nodes
+    xs = [v[0] for v in xy.values()]
+    ys = [v[1] for v in xy.values()]
+    reach = PAIR_REACH * max(max(xs) - min(xs), max(ys) - min(ys))
+    members = {
+        node: {
+            m.name
+            for m in frame.members
+            if _on_segment(xy[node], xy[m.nodes[0]], xy[m.nodes[1]], 1e-9)
+        }
+        for node in xy
+    }
+    point_at = {p.node: n for n, p in model.points.items()}
+    locs, seen = [], set()
+    for n, p in model.points.items():
+        for other in xy:
+            dist = math.dist(xy[p.node], xy[other])
+            pair = frozenset((p.node, other))
+            if not 0 < dist <= reach or members[p.node] & members[other] or pair in seen:
+                continue
+            seen.add(pair)
+            name = f"point {point_at[other]}" if other in point_at else other
+            for d in POINT_DIRECTIONS:
+                if d in moves.get(p.node, ()) and d in moves.get(other, ()):
                     locs.append(
                         Location(
-                            f"joint {j.name} {d}",
-                            ((DofRef(b, d), DofRef(a, d)),),
-                            joint=(j.name, d),
+                            f"point {n} to {name} {d}",
+                            ((DofRef(p.node, d), DofRef(other, d)),),
+                            kind_="pair",
                         )
                     )
     return locs
@@ -388,16 +490,17 @@ def default_candidates(
 ) -> list[Candidate]:
     """Every law at every location, joint releases, and each linear parameter of the model.
 
-    A mass is a candidate at point locations only; a released joint gets every law plus its
-    spring alone (``"joint_spring"``: a compliant joint, a linear effect). ``parameters``
-    (default: the model's linear parameters flagged ``calibrate``) become linear candidates.
+    A mass (at every direction of its node) is a candidate at a point's own location only; a
+    released joint gets every law plus its spring alone (``"joint_spring"``: a compliant
+    joint, a linear effect). ``parameters`` (default: the model's linear parameters flagged
+    ``calibrate``) become linear candidates.
     """
     locations = default_locations(model) if locations is None else list(locations)
     laws = default_laws() if laws is None else list(laws)
     out = []
     for loc in locations:
         for law in laws:
-            if law.kind == "mass" and loc.point is None:
+            if law.kind == "mass" and loc.kind != "point":
                 continue
             if loc.joint is not None and law.kind == "linear_spring":
                 continue  # the joint's own spring

@@ -22,6 +22,7 @@ from analysis.diagnosis.candidates import default_candidates
 from analysis.diagnosis.compare import compare, uncalibrated_note
 from analysis.diagnosis.diagnose import diagnose
 from analysis.diagnosis.result import DiagnosisSettings
+from analysis.diagnosis.separate import write_separating_plan
 from analysis.logs import add_debug_option, configure_logging, note_inputs, summarise_repeats
 from analysis.measurement_file import SteppedSineData, read_measurement, require_steps
 from analysis.model import load_model
@@ -69,7 +70,8 @@ def _progress(quiet: bool):
     return show
 
 
-def _stepped(path: str) -> SteppedSineData:
+def read_stepped(path: str) -> SteppedSineData:
+    """The stepped-sine run in ``path`` (a random run or a file without steps refused)."""
     data = read_measurement(path)
     if not isinstance(data, SteppedSineData):
         raise ValueError(f"{path}: a stepped-sine run is needed (this is a random run)")
@@ -94,7 +96,7 @@ def _note_uncalibrated(model) -> None:
 
 def cmd_compare(args) -> dict:
     """Residual blocks of a model against a file; figures with ``--figures``."""
-    model, data = _model(args), _stepped(args.run)
+    model, data = _model(args), read_stepped(args.run)
     pred = BranchMatchedPredictor(model, data, n_harmonics=args.harmonics, n_time=args.samples)
     with summarise_repeats("compare"):
         cmp = compare(model, data, predictor=pred, sigma=args.sigma)
@@ -127,7 +129,7 @@ def _settings(args) -> DiagnosisSettings:
 
 def cmd_diagnose(args) -> dict:
     """Which effect is missing."""
-    model, data = _model(args), _stepped(args.run)
+    model, data = _model(args), read_stepped(args.run)
     _note_uncalibrated(model)
     with summarise_repeats("diagnose"):
         result = diagnose(
@@ -144,12 +146,26 @@ def cmd_diagnose(args) -> dict:
     if not args.json:
         print(result.summary())
         print(f"({result.timings.get('total_s', 0):.1f} s)")
-    return result.to_json()
+    out = result.to_json()
+    if args.separate_plan:
+        out["separate_plan"] = _write_separate_plan(args.separate_plan, result, data)
+    return out
+
+
+def _write_separate_plan(path: str, result, data) -> str | None:
+    """Write the measurement separating a tie as a plan file; say so when there is no tie."""
+    if not result.recommendation:
+        reason = "no tie" if len(result.group) < 2 else "no configuration separates the tie"
+        print(f"note: no separating plan written ({reason})", file=sys.stderr)
+        return None
+    written = write_separating_plan(path, result.recommendation, data)
+    print(f"separating plan written to {written}", file=sys.stderr)
+    return str(written)
 
 
 def cmd_augment(args) -> dict:
     """Add the chosen effect (or the best of a diagnosis), recalibrate, compare."""
-    model, data = _model(args), _stepped(args.run)
+    model, data = _model(args), read_stepped(args.run)
     _note_uncalibrated(model)
     show = _progress(args.json)
     values = known = None
@@ -242,6 +258,11 @@ def add_parsers(subparsers) -> None:
     sp.add_argument("--linear-run", help="random-excitation test (for linear candidates)")
     sp.add_argument("--starts", type=int, default=4, help="extra starts for strong effects")
     sp.add_argument("--workers", type=int, default=2, help="processes for verifications")
+    sp.add_argument(
+        "--separate-plan",
+        metavar="PLAN.toml",
+        help="on a tie, write the measurement that separates it as a rig plan file",
+    )
     rescreen(sp)
     sp.set_defaults(func=cmd_diagnose)
 

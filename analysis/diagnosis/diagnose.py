@@ -36,7 +36,7 @@
    an iteration takes still varies from run to run, so a fit near its limit can end an
    iteration earlier or later).
 5. **Rank** the verified candidates by BIC on the same steps against the recalibrated model;
-   candidates within ``tie_bic`` of the best form a group (the simplest law first). The effect
+   candidates within ``tie_bic`` of the best form a tied group, ordered by BIC. The effect
    is *explained* when the best brings the residual to ``explained_rms`` of the noise;
    otherwise nothing in the library explains it and the tool says so. For a group, the
    measurement that would separate its members is computed
@@ -188,6 +188,14 @@ def _law_key(c: Candidate) -> tuple:
 
 _LINEAR_KINDS = ("mass", "linear_spring", "joint_spring", "parameter")
 
+#: Location kinds whose states the sensors do not measure directly (one spring, a group of
+#: springs, a joint direction, a point's unmeasured direction, two nodes): a class each in the
+#: short list (:func:`_shortlist`).
+UNMEASURED_KINDS = ("group", "spring", "joint", "direction", "pair")
+
+#: Locations of each unmeasured kind whose every law is refined for the short list.
+REFINED_LOCATIONS = 3
+
 
 def _shortlist(
     screen: Screen,
@@ -233,8 +241,8 @@ def _shortlist(
 
     best_gain = max((screen_gain(f) for f in nonlinear[:1]), default=np.inf)
     classes: list[ScreenFit] = []
-    for where in ("group", "joint"):
-        refined = [screen.refined(f) for f in nonlinear if f.candidate.location.kind == where]
+    for where in UNMEASURED_KINDS:
+        refined = [screen.refined(f) for f in _class_leaders(nonlinear, where)]
         by_bic = sorted(refined, key=lambda f: f.bic)
         picks = by_bic[:1] + [next((f for f in refined if f.candidate.law == lead), None)]
         for fam in evidence.families:
@@ -282,6 +290,18 @@ def _shortlist(
         if best is not None and all(best.candidate != g.candidate for g in first + second):
             second.append(best)
     return first, second[:4]
+
+
+def _class_leaders(fits: list[ScreenFit], where: str) -> list[ScreenFit]:
+    """Every law at the best :data:`REFINED_LOCATIONS` locations of kind ``where`` (by their
+    best law in the screen's first pass): a first pass can score a law there worse than the
+    model itself, but the location an effect sits at stands out under one law or another, so
+    the refinements of a kind stay at that many times the laws, whatever the size of the
+    structure."""
+    here = [f for f in fits if f.candidate.location.kind == where]
+    order = list(dict.fromkeys(f.candidate.location for f in sorted(here, key=lambda f: f.bic)))
+    keep = set(order[:REFINED_LOCATIONS])
+    return [f for f in here if f.candidate.location in keep]
 
 
 def _other_points(fits: list[ScreenFit], cand: Candidate, done) -> list[ScreenFit]:
@@ -857,10 +877,9 @@ def _rank(model: Model, refit: Verified, origin: list, done: list[Verified], st)
         return [], model_bic
     scored.sort(key=lambda t: t[0])
     best = scored[0][0]
-    tied = sorted(
-        [t for t in scored if t[0] - best <= st.tie_bic],
-        key=lambda t: (t[1].candidate.n_params, t[0]),
-    )
+    # within a tie the fit orders (BIC already charges each parameter): a rule that ignores
+    # the data (fewest parameters first) would pick among equals by construction
+    tied = [t for t in scored if t[0] - best <= st.tie_bic]
     rest = [t for t in scored if t[0] - best > st.tie_bic]
     ranked = []
     for i, (bic, o, v) in enumerate(tied + rest):

@@ -105,6 +105,9 @@ def discriminate(
                         "sensor": int(s),
                         "level_n": float(lv),
                         "range": rg.label,
+                        "start_hz": float(rg.start_hz),
+                        "stop_hz": float(rg.stop_hz),
+                        "step_hz": float(rg.step_hz),
                         "power": float(worst[si]),
                     }
                 )

@@ -297,9 +297,11 @@ class Diagnosis:
                 lines.append(f"verdict: explained by {g[0].candidate.label} ({kind})")
             else:
                 lines.append(
-                    f"verdict: explained ({kind}); tied within {self.settings.tie_bic:g} BIC: "
+                    f"verdict: explained ({kind}), but a tie: within {self.settings.tie_bic:g} "
+                    "BIC, which this test cannot separate: "
                     + "; ".join(r.candidate.label for r in g)
-                    + f" (the simplest first: {g[0].candidate.label})"
+                    + f" (best fit first: {g[0].candidate.label}, by "
+                    f"{g[1].bic - g[0].bic:.1f} BIC)"
                 )
         else:
             best = self.ranking[0] if self.ranking else None
@@ -319,6 +321,7 @@ class Diagnosis:
         base = self.baseline.bic if self.baseline is not None else 0.0
         return {
             "verdict": self.verdict,
+            "tie": len(self.group) > 1,
             "comparison": {
                 "chi2_per_dof": self.comparison.chi2_per_dof,
                 "rms_over_noise": self.comparison.rms_over_noise,

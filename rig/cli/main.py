@@ -28,6 +28,7 @@ import sys
 from rig.backends import available_backends, open_backend
 from rig.backends.protocol import BackendError, reference_values
 from rig.cli.run import EXIT_INTERRUPTED, EXIT_USAGE, add_run_commands
+from rig.cli.separate import add_separate_command
 from rig.cli.service import add_service_commands
 
 
@@ -128,6 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--json", action="store_true", help="print one JSON object")
     sp.set_defaults(func=cmd_amplifier)
     add_run_commands(sub)
+    add_separate_command(sub)
     add_service_commands(sub)
 
     sp = sub.add_parser(

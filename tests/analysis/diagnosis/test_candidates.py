@@ -23,7 +23,7 @@ def test_candidates_are_the_library_at_every_plausible_location(reference_model)
         "parameter",
     } <= kinds
     locations = {c.location.name for c in cands}
-    assert {"point 7", "point 13", "mounts", "joint clamp rz"} <= locations
+    assert {"point 7", "point 13", "springs k_mount", "joint clamp rz"} <= locations
     assert all(c.law.kind != "mass" or c.location.point is not None for c in cands)
     sides = {c.law.options.get("side") for c in cands if c.law.kind == "hertz_contact"}
     assert sides == {-1, 1}
@@ -36,7 +36,7 @@ def _find(cands, label):
 def test_each_kind_of_change_writes_a_valid_model(reference_model, tmp_path) -> None:
     cands = default_candidates(reference_model)
     cases = {
-        "cubic_spring at mounts": {"k3": 1e12},
+        "cubic_spring at springs k_mount": {"k3": 1e12},
         "hertz_contact (above) at point 7": {"k_c": 4e5, "v": 20.0, "gap": 1e-3},
         "coulomb_friction with a joint spring at joint clamp rz": {"f_slip": 2.0, "k_joint": 5e4},
         "mass at point 6": {"m": 0.05},
@@ -50,9 +50,11 @@ def test_each_kind_of_change_writes_a_valid_model(reference_model, tmp_path) -> 
         back = load_model(path)
         for name in new:
             assert back.parameters[name].value == model.parameters[name].value
-    mounts, new = _find(cands, "cubic_spring at mounts").apply(reference_model, {"k3": 1e12})
+    mounts, new = _find(cands, "cubic_spring at springs k_mount").apply(
+        reference_model, {"k3": 1e12}
+    )
     assert len([s for s in mounts.nonlinear if s.kind == "cubic_spring"]) == 4
-    assert new == ["k3_cubic_spring_mounts"]
+    assert new == ["k3_cubic_spring_springs_k_mount"]
     joint, new = _find(cands, "coulomb_friction with a joint spring at joint clamp rz").apply(
         reference_model, {"f_slip": 2.0, "k_joint": 5e4}
     )
@@ -71,3 +73,45 @@ def test_linear_laws_are_reported_as_linear() -> None:
     assert laws["mass"].is_linear and laws["linear_spring"].is_linear
     assert not laws["cubic_spring"].is_linear and not laws["coulomb_friction"].is_linear
     assert Candidate(default_candidates(load_model())[0].location, Law("joint_spring")).is_linear
+
+
+def test_locations_come_from_the_structure(reference_model) -> None:
+    from analysis.diagnosis.candidates import default_locations
+
+    locs = {loc.name: loc for loc in default_locations(reference_model)}
+    kinds: dict[str, set[str]] = {}
+    for name, loc in locs.items():
+        kinds.setdefault(loc.kind, set()).add(name)
+    # every spring on its own and the group sharing k_mount, named by what they are
+    assert kinds["spring"] == {
+        f"spring mount_{s}" for s in ("left_x", "left_y", "right_x", "right_y")
+    }
+    assert kinds["group"] == {"springs k_mount"}
+    assert len(locs["springs k_mount"].incidences) == 4
+    # every rigid direction of the clamp
+    assert kinds["joint"] == {"joint clamp x", "joint clamp y", "joint clamp rz"}
+    # each point in the other direction the frame moves in there (beam points measure y)
+    assert {"point 7 x", "point 13 y"} <= kinds["direction"]
+    assert len(kinds["direction"]) == len(reference_model.points)
+    # two nodes of different members within reach; none along one member (point 6 and the tip
+    # are 33 mm apart on the beam), none between coincident nodes (the clamp is a joint)
+    assert "point 7 to right_top y" in kinds["pair"]
+    at, to = locs["point 7 to right_top y"].incidences[0]
+    assert (at.node, to.node, at.direction, to.direction) == ("tip", "right_top", "y", "y")
+    assert not any("point 6 to point 7" in n or "point 7 to point 6" in n for n in kinds["pair"])
+    assert not any("beam_root" in n or "left_top" in n for n in kinds["pair"])
+    # a mass only at a point's own location (it acts in every direction of its node)
+    masses = {c.location.kind for c in default_candidates(reference_model) if c.law.kind == "mass"}
+    assert masses == {"point"}
+
+
+def test_springs_not_sharing_a_parameter_form_no_group(reference_model) -> None:
+    import dataclasses
+
+    from analysis.diagnosis.candidates import default_locations
+
+    frame = reference_model.frame
+    springs = tuple(dataclasses.replace(s, k=2.0e5) for s in frame.springs)
+    model = dataclasses.replace(reference_model, frame=dataclasses.replace(frame, springs=springs))
+    kinds = {loc.kind for loc in default_locations(model)}
+    assert "group" not in kinds and "spring" in kinds

@@ -106,10 +106,12 @@ def test_a_strong_effect_the_second_stop_is_found_at_the_tip(runs, reference_mod
 @pytest.mark.slow
 def test_hardening_mounts_are_placed_at_the_mounts(runs, reference_model, tmp_path) -> None:
     data = runs("hardening_mounts")
-    cands = _subset(reference_model, ("mounts", "point 6"), ("cubic_spring", "hertz_contact"))
+    cands = _subset(
+        reference_model, ("springs k_mount", "point 6"), ("cubic_spring", "hertz_contact")
+    )
     result = diagnose(reference_model, data, candidates=cands, settings=QUICK)
     assert result.verdict == "explained", result.summary()
-    assert result.rank_of("cubic_spring", "mounts") == 1
+    assert result.rank_of("cubic_spring", "springs k_mount") == 1
     k3 = next(v for k, v in result.group[0].verified.parameters.items() if k.startswith("k3"))
     truth = truth_as_model("hardening_mounts").parameters["k3_mount"].value
     assert abs(k3 / truth - 1) < 0.1  # within 10 % of the truth's

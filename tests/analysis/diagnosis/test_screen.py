@@ -17,7 +17,7 @@ def test_nothing_beats_the_true_model(runs, reference_model) -> None:
     base = screen.baseline()
     cands = _subset(
         reference_model,
-        ("point 5", "point 7", "mounts"),
+        ("point 5", "point 7", "springs k_mount"),
         ("cubic_spring", "quadratic_damper", "mass", "hertz_contact"),
     )
     fits = screen.run(cands, n_refine=3)

@@ -54,12 +54,14 @@ def test_further_starts_only_for_coefficients_at_unmeasured_dofs(reference_model
     from analysis.diagnosis.verify import _scaled_starts
 
     m = reference_model
-    mounts = _candidate(m, "cubic_spring at mounts")
+    mounts = _candidate(m, "cubic_spring at springs k_mount")
     applied, _ = mounts.apply(m, {"k3": 1e12})
     starts = _scaled_starts(_job(m, "x.h5", mounts, {"k3": 1e12}), applied)
-    assert starts == [{"k3_cubic_spring_mounts": 1e12 * f} for f in UNMEASURED_START_FACTORS]
+    assert starts == [
+        {"k3_cubic_spring_springs_k_mount": 1e12 * f} for f in UNMEASURED_START_FACTORS
+    ]
     # a clearance is not scaled, only the coefficients
-    contact = _candidate(m, "hertz_contact (above) at mounts")
+    contact = _candidate(m, "hertz_contact (above) at springs k_mount")
     values = {"k_c": 1e6, "v": 10.0, "gap": 1e-4}
     applied, _ = contact.apply(m, values)
     for s in _scaled_starts(_job(m, "x.h5", contact, values), applied):
@@ -81,11 +83,11 @@ def test_mounts_screened_twice_too_stiff_still_reach_the_noise(runs, reference_m
     the noise and the halved start was needed; at this truth's quieter accelerometers either
     start gets there, and from 2.5 times neither does.)"""
     data = runs("hardening_mounts")
-    cand = _candidate(reference_model, "cubic_spring at mounts")
+    cand = _candidate(reference_model, "cubic_spring at springs k_mount")
     k3 = truth_as_model("hardening_mounts").parameters["k3_mount"].value
     v = run_verify(_job(reference_model, data.path, cand, {"k3": 2 * k3}))
     assert v.rms_over_noise() <= 1.1, v.message
-    assert abs(v.parameters["k3_cubic_spring_mounts"] / k3 - 1) < 0.02
+    assert abs(v.parameters["k3_cubic_spring_springs_k_mount"] / k3 - 1) < 0.02
 
 
 def test_unmeasured_picks_are_refined_whatever_their_first_pass(reference_model) -> None:
@@ -99,11 +101,14 @@ def test_unmeasured_picks_are_refined_whatever_their_first_pass(reference_model)
         "hertz_contact (above) at point 6": -12516.0,
         "hertz_contact (above) at point 7": -12367.0,
         "cubic_spring at point 5": -12259.0,
-        "linear_damper at mounts": -1552.0,
-        "cubic_spring at mounts": 858.0,
+        "linear_damper at springs k_mount": -1552.0,
+        "cubic_spring at springs k_mount": 858.0,
         "coulomb_friction with a joint spring at joint clamp rz": 50000.0,
     }
-    refined = {"cubic_spring at mounts": -8405.0, "linear_damper at mounts": -2866.0}
+    refined = {
+        "cubic_spring at springs k_mount": -8405.0,
+        "linear_damper at springs k_mount": -2866.0,
+    }
 
     class Refiner:
         calls: list[str] = []
@@ -121,7 +126,7 @@ def test_unmeasured_picks_are_refined_whatever_their_first_pass(reference_model)
     assert labels == [
         "hertz_contact (above) at point 6",
         "hertz_contact (above) at point 7",
-        "cubic_spring at mounts",
+        "cubic_spring at springs k_mount",
         "cubic_spring at point 5",
     ]
     # every candidate at an unmeasured location is refined, not only the first pass's best
@@ -223,7 +228,7 @@ def test_a_best_law_at_a_point_walks_when_it_explains_the_misfit_or_went_far(
     st = DiagnosisSettings()
     m = reference_model
     at_point = _screened(m, "hertz_contact (above) at point 6")
-    at_mounts = _screened(m, "cubic_spring at mounts")
+    at_mounts = _screened(m, "cubic_spring at springs k_mount")
     c = at_point.candidate
     refit = _verified(None, 32.8)
     assert _walk_to(at_point, _verified(c, 1.27), refit, st) == "points"
@@ -329,11 +334,11 @@ def test_at_an_unmeasured_location_the_simplest_of_the_next_laws_go_on(reference
 
     m = reference_model
     refined = {
-        "hertz_contact (above) at mounts": -22123.0,
-        "two_sided_gap at mounts": -19043.0,
-        "gap_spring (above) at mounts": -18942.0,
-        "cubic_spring at mounts": -15960.0,
-        "coulomb_friction at mounts": -10099.0,
+        "hertz_contact (above) at springs k_mount": -22123.0,
+        "two_sided_gap at springs k_mount": -19043.0,
+        "gap_spring (above) at springs k_mount": -18942.0,
+        "cubic_spring at springs k_mount": -15960.0,
+        "coulomb_friction at springs k_mount": -10099.0,
         "hertz_contact (above) at point 7": -30000.0,
     }
 
@@ -345,7 +350,7 @@ def test_at_an_unmeasured_location_the_simplest_of_the_next_laws_go_on(reference
     lead = fits[0].candidate
     laws = _other_laws(Screen(), fits, lead, [lead, fits[-1].candidate], 2)
     assert [f.candidate.label for f in laws] == [
-        "cubic_spring at mounts",
-        "two_sided_gap at mounts",
+        "cubic_spring at springs k_mount",
+        "two_sided_gap at springs k_mount",
     ]
     assert all(f.refined for f in laws)
