@@ -18,11 +18,50 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-__all__ = ["REQUIRED", "ConfigError", "Table", "read_toml"]
+__all__ = ["REQUIRED", "ConfigError", "KeyPath", "Table", "dotted", "read_toml"]
+
+#: A key path: table keys and array indices, ``("excitation", "levels_n", 1)``.
+KeyPath = tuple[str | int, ...]
+
+
+def dotted(path: KeyPath) -> str:
+    """``("frequencies", "ranges", 0, "stop_hz")`` -> ``"frequencies.ranges[0].stop_hz"``."""
+    out = ""
+    for part in path:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
 
 
 class ConfigError(ValueError):
-    """A setup or plan is invalid; the message names the source and the key."""
+    """A setup or plan is invalid.
+
+    ``ConfigError(source, path, problem)`` reads ``"source: key.path[1]: problem"``
+    (``"Class.key.path[1]: problem"`` with ``joined``, for a class built in Python); its
+    :attr:`path` (a :data:`KeyPath`, empty for the whole document) and :attr:`problem` are kept
+    for whoever shows the error at its field. ``ConfigError(message)`` is a problem of no key.
+    """
+
+    path: KeyPath
+
+    def __init__(
+        self, source: str, path: KeyPath | None = None, problem: str = "", joined: bool = False
+    ) -> None:
+        if path is None:
+            self.source, self.path, self.problem = "", (), source
+            super().__init__(source)
+            return
+        self.source, self.path, self.problem = source, tuple(path), problem
+        where = dotted(self.path)
+        if joined:
+            super().__init__(f"{source}.{where}: {problem}" if where else f"{source}: {problem}")
+        else:
+            where = where or "(root)"
+            super().__init__(f"{source}: {where}: {problem}" if source else f"{where}: {problem}")
+
+    @property
+    def key(self) -> str:
+        """The key path as text (``"excitation.levels_n[1]"``; empty for the document)."""
+        return dotted(self.path)
 
 
 class _Required:
@@ -40,7 +79,7 @@ def read_toml(path: Path, what: str) -> dict[str, Any]:
         with open(path, "rb") as fh:
             return tomllib.load(fh)
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{what} ({path}): not valid TOML: {exc}") from exc
+        raise ConfigError(f"{what} ({path})", (), f"not valid TOML: {exc}") from exc
     except OSError as exc:
         raise ConfigError(f"{what}: cannot read {path}: {exc.strerror or exc}") from exc
 
@@ -54,27 +93,28 @@ class Table:
         The table's contents.
     source : str
         Where it comes from, e.g. ``"setup 'reference' (rig/setups/reference.toml)"``.
-    path : str
+    path : KeyPath
         Key path of this table inside the document (empty for the root).
     """
 
-    def __init__(self, data: Mapping[str, Any], source: str, path: str = "") -> None:
+    def __init__(self, data: Mapping[str, Any], source: str, path: KeyPath = ()) -> None:
         if not isinstance(data, Mapping):
-            raise ConfigError(f"{source}: {path or '(root)'}: expected a table, got {data!r}")
+            raise ConfigError(source, path, f"expected a table, got {data!r}")
         self._data = dict(data)
         self.source = source
         self.path = path
         self._used: set[str] = set()
 
     # -- errors ---------------------------------------------------------------------------------
-    def key_path(self, key: str) -> str:
-        """Full dotted path of ``key``."""
-        return f"{self.path}.{key}" if self.path else key
+    def key_path(self, key: str | int) -> KeyPath:
+        """Full key path of ``key``."""
+        return (*self.path, key)
 
-    def error(self, key: str | None, problem: str) -> ConfigError:
-        """A :class:`ConfigError` for ``key`` of this table (or the table itself)."""
-        where = self.key_path(key) if key else (self.path or "(root)")
-        return ConfigError(f"{self.source}: {where}: {problem}")
+    def error(self, key: str | None, problem: str, index: int | None = None) -> ConfigError:
+        """A :class:`ConfigError` for ``key`` (entry ``index`` of it) of this table, or the
+        table itself."""
+        where = self.path if key is None else self.key_path(key)
+        return ConfigError(self.source, where if index is None else (*where, index), problem)
 
     @contextmanager
     def checking(self, key: str | None = None) -> Iterator[None]:
@@ -140,16 +180,18 @@ class Table:
             return value
         return self._number(key, value, positive, minimum)
 
-    def _number(self, key: str, value: Any, positive: bool, minimum: float | None) -> float:
+    def _number(
+        self, key: str, value: Any, positive: bool, minimum: float | None, index: int | None = None
+    ) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.error(key, f"expected a number, got {value!r}")
+            raise self.error(key, f"expected a number, got {value!r}", index)
         x = float(value)
         if not math.isfinite(x):
-            raise self.error(key, f"must be finite, got {value!r}")
+            raise self.error(key, f"must be finite, got {value!r}", index)
         if positive and x <= 0:
-            raise self.error(key, f"must be > 0, got {value!r}")
+            raise self.error(key, f"must be > 0, got {value!r}", index)
         if minimum is not None and x < minimum:
-            raise self.error(key, f"must be >= {minimum:g}, got {value!r}")
+            raise self.error(key, f"must be >= {minimum:g}, got {value!r}", index)
         return x
 
     def numbers(self, key: str, default: Any = REQUIRED, positive: bool = False):
@@ -159,7 +201,7 @@ class Table:
             return value
         if not isinstance(value, list) or not value:
             raise self.error(key, f"expected a non-empty array of numbers, got {value!r}")
-        return tuple(self._number(f"{key}[{i}]", v, positive, None) for i, v in enumerate(value))
+        return tuple(self._number(key, v, positive, None, i) for i, v in enumerate(value))
 
     def integers(self, key: str, default: Any = REQUIRED, minimum: int | None = None):
         """A non-empty array of integers."""
@@ -171,9 +213,9 @@ class Table:
         out = []
         for i, v in enumerate(value):
             if isinstance(v, bool) or not isinstance(v, int):
-                raise self.error(f"{key}[{i}]", f"expected an integer, got {v!r}")
+                raise self.error(key, f"expected an integer, got {v!r}", i)
             if minimum is not None and v < minimum:
-                raise self.error(f"{key}[{i}]", f"must be >= {minimum}, got {v}")
+                raise self.error(key, f"must be >= {minimum}, got {v}", i)
             out.append(v)
         return tuple(out)
 
@@ -200,7 +242,7 @@ class Table:
             raise self.error(key, f"expected an array of tables ([[{key}]]), got {value!r}")
         if required and not value:
             raise self.error(key, "at least one entry is needed")
-        return [Table(v, self.source, f"{self.key_path(key)}[{i}]") for i, v in enumerate(value)]
+        return [Table(v, self.source, (*self.key_path(key), i)) for i, v in enumerate(value)]
 
     def finish(self) -> None:
         """Raise on keys that were never read (misspelt or unknown settings)."""
