@@ -410,6 +410,15 @@ class ResponseLimit:
         if not given:
             raise SettingError((), f"{self.target}: no limit given")
 
+    @model_serializer(mode="wrap")
+    def _only_the_target(self, handler):  # type: ignore[no-untyped-def]
+        """The file names the channel or the point, not the placeholder of the other."""
+        data = handler(self)
+        unset = ("point", -1) if self.channel else ("channel", "")
+        if data.get(unset[0]) == unset[1]:
+            del data[unset[0]]
+        return data
+
     @property
     def target(self) -> str:
         """``"channel NAME"`` or ``"point N"``."""
