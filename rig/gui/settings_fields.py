@@ -5,7 +5,7 @@ A form edits a *settings document*: the nested plain data that a plan's or a set
 ``to_dict()`` gives and ``plan_from_dict`` / ``setup_from_dict`` read back. Its fields are
 generated from the classes themselves (:func:`dataclass_fields`): one field per setting, its
 label from the name (the unit suffix becomes a unit in brackets: ``ramp_s`` -> ``ramp [s]``).
-For the classes declared in :mod:`rig.config.settings` (the plans) the kind, the choices and
+For the classes declared in :mod:`rig.config.settings` (plans, setups) the kind, the choices and
 the tooltip are the declaration's; for plain dataclasses the kind follows the default's type
 and the tooltip comes from the class docstring's Parameters section. Text that is not a number
 is passed on as typed, so the loader's own message says what is wrong with it
