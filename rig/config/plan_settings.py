@@ -1,21 +1,21 @@
 """The settings a test plan is made of: frequencies, excitation, acquisition, control, limits.
 
-Frozen dataclasses with units in their names, validated on construction (a ``ValueError``
-names the class and the field). :mod:`rig.config.plans` assembles them into plans and
-:mod:`rig.config.plan_files` reads them from TOML.
+Declared once (:mod:`rig.config.settings`): each field with its type, unit (in the name),
+default, bounds and doc; frozen dataclasses validated on construction. :mod:`rig.config.plans`
+assembles them into plans and :mod:`rig.config.plan_files` reads them from TOML.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
 from fractions import Fraction
-from typing import ClassVar
+from typing import Annotated, Any, ClassVar, Literal, get_args
 
 import numpy as np
+from pydantic import Field, model_serializer, model_validator
 
-from rig.signals.multisine import MultisineSpec, as_orders
-from rig.signals.random import RANDOM_KINDS
+from rig.config.settings import Flag, Integer, Number, Orders, SettingError, Text, settings
+from rig.signals.multisine import MultisineSpec
+from rig.signals.random import RandomKind
 
 __all__ = [
     "MAX_PLAN_STEPS",
@@ -34,7 +34,8 @@ __all__ = [
     "ResponseLimit",
 ]
 
-DIRECTIONS = ("up", "down", "up-down", "down-up")
+Direction = Literal["up", "down", "up-down", "down-up"]
+DIRECTIONS: tuple[str, ...] = get_args(Direction)
 _FREQ_DECIMALS = 6  # frequencies closer than 1e-6 Hz are the same step
 #: The most steps a stepped-sine plan may hold. A step takes a second or more (settling and
 #: averaging), so this is over a day of shaking; a plan beyond it is a mistyped ``step_hz``,
@@ -42,115 +43,76 @@ _FREQ_DECIMALS = 6  # frequencies closer than 1e-6 Hz are the same step
 MAX_PLAN_STEPS = 100_000
 
 
-class PlanTooLarge(ValueError):
+class PlanTooLarge(SettingError):
     """A plan (or one frequency range of it) with more than :data:`MAX_PLAN_STEPS` steps."""
 
 
-def _positive(owner: str, name: str, value: float) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ValueError(f"{owner}.{name}: expected a finite number, got {value!r}")
-    if value <= 0:
-        raise ValueError(f"{owner}.{name}: must be > 0, got {value!r}")
+def _doc(doc: str, default: Any = ..., **bounds: Any) -> Any:
+    return Field(default, description=doc, **bounds)
 
 
-def _at_least(owner: str, name: str, value: int, minimum: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise ValueError(f"{owner}.{name}: expected an integer >= {minimum}, got {value!r}")
+Positive = Annotated[Number, Field(gt=0)]
+NonNegative = Annotated[Number, Field(ge=0)]
 
 
 # ------------------------------------------------------------------------ frequencies
 
 
-_CONTROL_POSITIVE = (
-    "max_drive_v",
-    "fundamental_amplitude_tolerance",
-    "fundamental_phase_tolerance_deg",
-    "harmonic_tolerance",
-    "max_step_ratio",
-    "gain_uncertainty",
-    "coupling_uncertainty",
-)
-
-
-@dataclass(frozen=True)
+@settings()
 class ControlSettings:
-    """Tolerances, estimator prior and safety limits of the force controller.
+    """Tolerances, estimator prior and safety limits of the force controller."""
 
-    Parameters
-    ----------
-    orders : tuple of Fraction
-        Harmonic orders (H); order 1 must be present.
-    max_drive_v : float
-        Largest allowed peak of the drive waveform [V] (keep it below the output limit).
-    fundamental_amplitude_tolerance : float
-        Relative amplitude tolerance of the fundamental force.
-    fundamental_phase_tolerance_deg : float
-        Phase tolerance of the fundamental force [deg].
-    harmonic_tolerance : float
-        Tolerance of order k relative to its own target: ``|F_k - T_k| <= tol |T_k|``.
-    harmonic_floor_ratio : float
-        Absolute floor of that tolerance relative to ``|T_1|`` (needed for zero targets).
-    max_iterations : int
-        Most measurements per step.
-    max_step_ratio : float
-        Largest drive change per iteration relative to ``|V|`` (2-norm over orders).
-    gain_uncertainty : float
-        Prior relative standard deviation of the initial diagonal gains.
-    coupling_uncertainty : float
-        Prior standard deviation of a cross-order gain relative to ``sqrt(|J_ii J_jj|)``.
-    gain_drift : float
-        Fraction of the prior covariance added before each update (0 keeps every secant,
-        right only for a linear plant).
-    divergence_patience : int
-        Diverged if the error grew over this many consecutive iterations.
-    max_gain_ratio : float
-        Diverged if a diagonal gain changes magnitude by more than this factor (either way).
-    max_gain_phase_change_deg : float
-        Diverged if a diagonal gain rotates by more than this [deg].
-    max_condition : float
-        Diverged if the gain matrix's condition number exceeds this (singular estimate).
-    """
-
-    orders: tuple[Fraction, ...] = (Fraction(1), Fraction(2), Fraction(3))
-    max_drive_v: float = 1.0
-    fundamental_amplitude_tolerance: float = 0.01
-    fundamental_phase_tolerance_deg: float = 1.0
-    harmonic_tolerance: float = 0.10
-    harmonic_floor_ratio: float = 0.002
-    max_iterations: int = 8
-    max_step_ratio: float = 0.5
-    gain_uncertainty: float = 0.3
-    coupling_uncertainty: float = 0.03
-    gain_drift: float = 0.3
-    divergence_patience: int = 2
-    max_gain_ratio: float = 10.0
-    max_gain_phase_change_deg: float = 90.0
-    max_condition: float = 1e6
+    orders: Orders = _doc("Harmonic orders (H); order 1 must be present.", (1, 2, 3))
+    max_drive_v: Positive = _doc(
+        "Largest allowed peak of the drive waveform [V] (keep it below the output limit).", 1.0
+    )
+    fundamental_amplitude_tolerance: Positive = _doc(
+        "Relative amplitude tolerance of the fundamental force.", 0.01
+    )
+    fundamental_phase_tolerance_deg: Positive = _doc(
+        "Phase tolerance of the fundamental force [deg].", 1.0
+    )
+    harmonic_tolerance: Positive = _doc(
+        "Tolerance of order k relative to its own target: |F_k - T_k| <= tol |T_k|.", 0.10
+    )
+    harmonic_floor_ratio: NonNegative = _doc(
+        "Absolute floor of that tolerance relative to |T_1| (needed for zero targets).", 0.002
+    )
+    max_iterations: Integer = _doc("Most measurements per step.", 8, ge=1)
+    max_step_ratio: Positive = _doc(
+        "Largest drive change per iteration relative to |V| (2-norm over orders).", 0.5
+    )
+    gain_uncertainty: Positive = _doc(
+        "Prior relative standard deviation of the initial diagonal gains.", 0.3
+    )
+    coupling_uncertainty: Positive = _doc(
+        "Prior standard deviation of a cross-order gain relative to sqrt(|J_ii J_jj|).", 0.03
+    )
+    gain_drift: NonNegative = _doc(
+        "Fraction of the prior covariance added before each update (0 keeps every secant, "
+        "right only for a linear plant).",
+        0.3,
+    )
+    divergence_patience: Integer = _doc(
+        "Diverged if the error grew over this many consecutive iterations.", 2, ge=1
+    )
+    max_gain_ratio: Number = _doc(
+        "Diverged if a diagonal gain changes magnitude by more than this factor (either way).",
+        10.0,
+        gt=1,
+    )
+    max_gain_phase_change_deg: Number = _doc(
+        "Diverged if a diagonal gain rotates by more than this [deg].", 90.0, gt=0, le=180
+    )
+    max_condition: Number = _doc(
+        "Diverged if the gain matrix's condition number exceeds this (singular estimate).",
+        1e6,
+        gt=1,
+    )
 
     def __post_init__(self) -> None:
-        orders = as_orders(self.orders, "ControlSettings.orders")
-        if Fraction(1) not in orders:
-            raise ValueError("ControlSettings.orders: order 1 (the fundamental) must be present")
-        object.__setattr__(self, "orders", orders)
-        for name in _CONTROL_POSITIVE:
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"ControlSettings.{name}: must be finite and > 0, got {value}")
-        for name in ("harmonic_floor_ratio", "gain_drift"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"ControlSettings.{name}: must be finite and >= 0, got {value}")
-        for name in ("max_iterations", "divergence_patience"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"ControlSettings.{name}: must be >= 1, got {getattr(self, name)}")
-        for name in ("max_gain_ratio", "max_condition"):
-            if not getattr(self, name) > 1:
-                raise ValueError(f"ControlSettings.{name}: must be > 1, got {getattr(self, name)}")
-        if not 0 < self.max_gain_phase_change_deg <= 180:
-            raise ValueError(
-                "ControlSettings.max_gain_phase_change_deg: must be in (0, 180], got "
-                f"{self.max_gain_phase_change_deg}"
-            )
+        if Fraction(1) not in self.orders:
+            raise SettingError(("orders",), "order 1 (the fundamental) must be present")
 
     @property
     def fundamental_index(self) -> int:
@@ -158,40 +120,32 @@ class ControlSettings:
         return self.orders.index(Fraction(1))
 
 
-@dataclass(frozen=True)
+@settings()
 class FrequencyRange:
-    """Equally spaced fundamental frequencies ``start_hz, start_hz + step_hz, ..., stop_hz``.
+    """Equally spaced fundamental frequencies ``start_hz, start_hz + step_hz, ..., stop_hz``."""
 
-    Parameters
-    ----------
-    start_hz, stop_hz : float
-        First and last frequency [Hz]; ``stop_hz`` must be reached in whole steps.
-    step_hz : float
-        Spacing [Hz].
-    """
-
-    start_hz: float
-    stop_hz: float
-    step_hz: float
+    start_hz: Positive = _doc("First frequency [Hz].")
+    stop_hz: Positive = _doc("Last frequency [Hz]; reached from start_hz in whole steps.")
+    step_hz: Positive = _doc("Spacing [Hz].")
 
     def __post_init__(self) -> None:
-        for name in ("start_hz", "stop_hz", "step_hz"):
-            _positive("FrequencyRange", name, getattr(self, name))
         if self.stop_hz < self.start_hz:
-            raise ValueError(
-                f"FrequencyRange: stop_hz {self.stop_hz} is below start_hz {self.start_hz}"
+            raise SettingError(
+                ("stop_hz",), f"is below start_hz ({self.start_hz}), got {self.stop_hz}"
             )
         n = (self.stop_hz - self.start_hz) / self.step_hz
         if n + 1 > MAX_PLAN_STEPS:
             raise PlanTooLarge(
-                f"FrequencyRange: {self.start_hz} to {self.stop_hz} Hz in {self.step_hz} Hz "
-                f"steps is {round(n) + 1:,} frequencies, more than a plan may hold "
-                f"({MAX_PLAN_STEPS:,} steps): check step_hz"
+                ("step_hz",),
+                f"{self.start_hz} to {self.stop_hz} Hz in {self.step_hz} Hz steps is "
+                f"{round(n) + 1:,} frequencies, more than a plan may hold "
+                f"({MAX_PLAN_STEPS:,} steps): check step_hz",
             )
         if abs(n - round(n)) > 1e-6 * max(1.0, n):
-            raise ValueError(
-                f"FrequencyRange: {self.start_hz} to {self.stop_hz} Hz is not a whole number of "
-                f"{self.step_hz} Hz steps"
+            raise SettingError(
+                ("stop_hz",),
+                f"{self.start_hz} to {self.stop_hz} Hz is not a whole number of "
+                f"{self.step_hz} Hz steps",
             )
 
     @property
@@ -205,31 +159,18 @@ class FrequencyRange:
         return np.round(self.start_hz + self.step_hz * np.arange(n + 1), _FREQ_DECIMALS)
 
 
-@dataclass(frozen=True)
+@settings()
 class FrequencyPlan:
-    """The fundamental frequencies of a sweep and its direction.
+    """The fundamental frequencies of a sweep and its direction."""
 
-    Parameters
-    ----------
-    ranges : tuple of FrequencyRange
-        Their union is swept; frequencies shared by two ranges (within 1e-6 Hz) are measured
-        once (the paper: 21-40 Hz in 1 Hz plus 24-28 Hz in 0.1 Hz is 56 frequencies).
-    direction : {"up", "down", "up-down", "down-up"}
-        Sweep direction at each level; the two-way kinds measure every frequency twice.
-    """
-
-    ranges: tuple[FrequencyRange, ...]
-    direction: str = "up"
-
-    def __post_init__(self) -> None:
-        ranges = tuple(self.ranges)
-        if not ranges or not all(isinstance(r, FrequencyRange) for r in ranges):
-            raise ValueError("FrequencyPlan.ranges: at least one FrequencyRange is needed")
-        if self.direction not in DIRECTIONS:
-            raise ValueError(
-                f"FrequencyPlan.direction: expected one of {DIRECTIONS}, got {self.direction!r}"
-            )
-        object.__setattr__(self, "ranges", ranges)
+    ranges: tuple[FrequencyRange, ...] = _doc(
+        "Their union is swept; frequencies shared by two ranges (within 1e-6 Hz) are measured "
+        "once (the paper: 21-40 Hz in 1 Hz plus 24-28 Hz in 0.1 Hz is 56 frequencies).",
+        min_length=1,
+    )
+    direction: Direction = _doc(
+        "Sweep direction at each level; the two-way kinds measure every frequency twice.", "up"
+    )
 
     def frequencies_hz(self) -> np.ndarray:
         """Every planned frequency once, ascending, shape (n,) [Hz]."""
@@ -247,179 +188,192 @@ class FrequencyPlan:
 # ------------------------------------------------------------------------ stepped-sine settings
 
 
-@dataclass(frozen=True)
+@settings()
 class ExcitationSettings:
-    """The multi-sine force and its levels.
+    """The multi-sine force and its levels."""
 
-    Parameters
-    ----------
-    orders : tuple of Fraction
-        Harmonic orders of the force (order 1 required).
-    relative_amplitudes : tuple of float
-        Amplitude of each order relative to the fundamental (fundamental 1).
-    phases_deg : tuple of float
-        Phase of each order relative to its order times the fundamental's phase [deg].
-    levels_n : tuple of float
-        Fundamental force amplitudes [N], in the order they are run.
-    """
-
-    orders: tuple[Fraction, ...] = (Fraction(1), Fraction(2), Fraction(3))
-    relative_amplitudes: tuple[float, ...] = (1.0, 0.02, 0.02)
-    phases_deg: tuple[float, ...] | None = None
-    levels_n: tuple[float, ...] = (2.0,)
+    orders: Orders = _doc("Harmonic orders of the force (order 1 required).", (1, 2, 3))
+    relative_amplitudes: tuple[Number, ...] | None = _doc(
+        "Amplitude of each order relative to the fundamental (default: 1 for the fundamental, "
+        "0.02 for the others).",
+        None,
+    )
+    phases_deg: tuple[Number, ...] | None = _doc(
+        "Phase of each order relative to its order times the fundamental's phase [deg] "
+        "(default: 0).",
+        None,
+    )
+    levels_n: tuple[Positive, ...] = _doc(
+        "Fundamental force amplitudes [N], in the order they are run.", (2.0,), min_length=1
+    )
 
     def __post_init__(self) -> None:
-        orders = as_orders(self.orders, "ExcitationSettings.orders")
-        phases = self.phases_deg
-        if phases is None:
-            phases = (0.0,) * len(orders)
-        object.__setattr__(self, "orders", orders)
-        object.__setattr__(self, "relative_amplitudes", tuple(map(float, self.relative_amplitudes)))
-        object.__setattr__(self, "phases_deg", tuple(map(float, phases)))
-        levels = tuple(float(v) for v in self.levels_n)
-        if not levels:
-            raise ValueError("ExcitationSettings.levels_n: at least one level is needed")
-        for i, v in enumerate(levels):
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"ExcitationSettings.levels_n[{i}]: must be > 0 N, got {v}")
-        object.__setattr__(self, "levels_n", levels)
+        if self.relative_amplitudes is None:
+            amplitudes = tuple(1.0 if o == 1 else 0.02 for o in self.orders)
+            object.__setattr__(self, "relative_amplitudes", amplitudes)
+        if self.phases_deg is None:
+            object.__setattr__(self, "phases_deg", (0.0,) * len(self.orders))
         _ = self.spec  # validates amplitudes and phases against the orders
 
     @property
     def spec(self) -> MultisineSpec:
         """The force shape for :mod:`rig.signals.multisine`."""
+        assert self.relative_amplitudes is not None and self.phases_deg is not None
         try:
             return MultisineSpec(
                 self.orders,
                 self.relative_amplitudes,
-                tuple(math.radians(p) for p in self.phases_deg),
+                tuple(np.radians(p) for p in self.phases_deg),
             )
         except ValueError as exc:
             raise ValueError(str(exc).replace("MultisineSpec", "ExcitationSettings")) from None
 
 
-@dataclass(frozen=True)
+@settings()
 class AcquisitionSettings:
-    """Settling, averaging and ramps of a stepped-sine step.
+    """Settling, averaging and ramps of a stepped-sine step."""
 
-    Parameters
-    ----------
-    block_periods : int
-        Base periods per block (the unit of averaging and of the settling test).
-    average_blocks : int
-        Blocks averaged for each force-control measurement (>= 4, the settling test needs them).
-    record_blocks : int
-        Blocks averaged for the recorded step (>= ``average_blocks``): after the controller
-        accepts a drive, acquisition continues at that drive to this many blocks.
-    settle_periods : int
-        Base periods waited after a frequency or level change before blocks count.
-    correction_settle_periods : int
-        Base periods waited after a force-control correction (a small drive change).
-    max_settle_periods : int
-        Longest wait for the settling test to pass; the step then goes on and a warning says so.
-    settling_tolerance : float
-        Allowed change of the fundamental phasors between consecutive blocks, relative.
-    drift_tolerance : float
-        Allowed difference between the means of the two halves of the averaged blocks,
-        relative (a slow drift that the block-to-block test misses).
-    ramp_s : float
-        Cross-fade between drive waveforms [s].
-    store_raw : bool
-        Keep the averaged time blocks of each recorded step in the file (``/raw``).
-    force_orders_up_to : int
-        Also record the drive force at every whole order up to this one that the drive does
-        not contain (the file's extra orders). Where the structure responds nonlinearly the
-        shaker pushes back at the harmonics of the response, and a model driven by the
-        measured force needs those forces too; 0: the drive's orders only.
-    """
-
-    block_periods: int = 1
-    average_blocks: int = 16
-    record_blocks: int = 48
-    settle_periods: int = 20
-    correction_settle_periods: int = 10
-    max_settle_periods: int = 400
-    settling_tolerance: float = 0.01
-    drift_tolerance: float = 0.005
-    ramp_s: float = 0.05
-    store_raw: bool = False
-    force_orders_up_to: int = 0
+    block_periods: Integer = _doc(
+        "Base periods per block (the unit of averaging and of the settling test).", 1, ge=1
+    )
+    average_blocks: Integer = _doc(
+        "Blocks averaged for each force-control measurement (>= 4, the settling test needs them).",
+        16,
+        ge=4,
+    )
+    record_blocks: Integer = _doc(
+        "Blocks averaged for the recorded step (>= average_blocks): after the controller "
+        "accepts a drive, acquisition continues at that drive to this many blocks.",
+        48,
+    )
+    settle_periods: Integer = _doc(
+        "Base periods waited after a frequency or level change before blocks count.", 20, ge=0
+    )
+    correction_settle_periods: Integer = _doc(
+        "Base periods waited after a force-control correction (a small drive change).",
+        10,
+        ge=0,
+    )
+    max_settle_periods: Integer = _doc(
+        "Longest wait for the settling test to pass (>= settle_periods); the step then goes on "
+        "and a warning says so.",
+        400,
+    )
+    settling_tolerance: Positive = _doc(
+        "Allowed change of the fundamental phasors between consecutive blocks, relative.", 0.01
+    )
+    drift_tolerance: Positive = _doc(
+        "Allowed difference between the means of the two halves of the averaged blocks, "
+        "relative (a slow drift that the block-to-block test misses).",
+        0.005,
+    )
+    ramp_s: Positive = _doc("Cross-fade between drive waveforms [s].", 0.05)
+    store_raw: Flag = _doc(
+        "Keep the averaged time blocks of each recorded step in the file (/raw).", False
+    )
+    force_orders_up_to: Integer = _doc(
+        "Also record the drive force at every whole order up to this one that the drive does "
+        "not contain (the file's extra orders): where the structure responds nonlinearly the "
+        "shaker pushes back at the harmonics of the response, and a model driven by the "
+        "measured force needs those forces too; 0: the drive's orders only.",
+        0,
+        ge=0,
+    )
 
     def __post_init__(self) -> None:
-        owner = "AcquisitionSettings"
-        _at_least(owner, "force_orders_up_to", self.force_orders_up_to, 0)
-        _at_least(owner, "block_periods", self.block_periods, 1)
-        _at_least(owner, "average_blocks", self.average_blocks, 4)
-        _at_least(owner, "record_blocks", self.record_blocks, self.average_blocks)
-        _at_least(owner, "settle_periods", self.settle_periods, 0)
-        _at_least(owner, "correction_settle_periods", self.correction_settle_periods, 0)
-        _at_least(owner, "max_settle_periods", self.max_settle_periods, self.settle_periods)
-        for name in ("settling_tolerance", "drift_tolerance", "ramp_s"):
-            _positive(owner, name, getattr(self, name))
+        for name, least in (
+            ("record_blocks", "average_blocks"),
+            ("max_settle_periods", "settle_periods"),
+        ):
+            if getattr(self, name) < getattr(self, least):
+                raise SettingError(
+                    (name,),
+                    f"must be >= {least} ({getattr(self, least)}), got {getattr(self, name)}",
+                )
 
 
-@dataclass(frozen=True)
+@settings()
 class ControlPolicy:
     """Force control of each step.
 
-    Parameters
-    ----------
-    settings : ControlSettings
-        Tolerances and limits of :class:`rig.procedures.force_control.ForceController` (its
-        ``max_drive_v`` is
-        the plan's drive limit, its orders the excitation's).
-    uncertainty_factor : float
-        A measured force phasor also counts as on target when its deviation from the target is
-        within this many standard errors of the measurement (a deviation the averaging cannot
-        resolve is not chased); 0 switches this off.
-    warm_start : bool
-        Start each step from the previous step's gain estimate (otherwise from the loop check).
-    on_divergence : {"abort", "record"}
-        When the iteration diverges: stop the run (the loop is not behaving physically), or
-        record the best measurement flagged as not converged and go on.
-    restart_after : int
-        Start the iteration again, from the force per volt of the latest measurement, when
-        after this many iterations the latest error is above 10 % and twice the best so far
-        (0: never). Near the fold of a nonlinear resonance the response can jump to another
-        branch; the gain learnt before the jump then misleads the controller. The total number
-        of measurements per step stays within ``max_iterations``.
-    divergence_abort_error : float
-        With ``"abort"``: a diverged step whose best error (``max_k |F_k - T_k| / |T_1|``) is
-        below this is recorded flagged as not converged and the run goes on (near a jump of a
-        nonlinear response the iteration can wander without anything being wrong); above it
-        the run stops.
+    In a plan file the ``[control]`` table holds these fields and those of
+    :class:`ControlSettings` side by side, except ``orders`` and ``max_drive_v`` (the
+    excitation's orders and the plan's drive limit).
     """
 
-    settings: ControlSettings = field(default_factory=ControlSettings)
-    uncertainty_factor: float = 2.0
-    warm_start: bool = True
-    on_divergence: str = "abort"
-    divergence_abort_error: float = 0.5
-    restart_after: int = 4
+    settings: ControlSettings = _doc(
+        "Tolerances and limits of the force controller (its max_drive_v is the plan's drive "
+        "limit, its orders the excitation's).",
+        default_factory=ControlSettings,
+    )
+    uncertainty_factor: NonNegative = _doc(
+        "A measured force phasor also counts as on target when its deviation from the target "
+        "is within this many standard errors of the measurement (a deviation the averaging "
+        "cannot resolve is not chased); 0 switches this off.",
+        2.0,
+    )
+    warm_start: Flag = _doc(
+        "Start each step from the previous step's gain estimate (otherwise from the loop check).",
+        True,
+    )
+    on_divergence: Literal["abort", "record"] = _doc(
+        "When the iteration diverges: stop the run (the loop is not behaving physically), or "
+        "record the best measurement flagged as not converged and go on.",
+        "abort",
+    )
+    divergence_abort_error: Positive = _doc(
+        "With 'abort': a diverged step whose best error (max_k |F_k - T_k| / |T_1|) is below "
+        "this is recorded flagged as not converged and the run goes on (near a jump of a "
+        "nonlinear response the iteration can wander without anything being wrong); above it "
+        "the run stops.",
+        0.5,
+    )
+    restart_after: Integer = _doc(
+        "Start the iteration again, from the force per volt of the latest measurement, when "
+        "after this many iterations the latest error is above 10 % and twice the best so far "
+        "(0: never): near the fold of a nonlinear resonance the response can jump to another "
+        "branch and the gain learnt before the jump misleads the controller. The total number "
+        "of measurements per step stays within max_iterations.",
+        4,
+        ge=0,
+    )
 
-    def __post_init__(self) -> None:
-        if not isinstance(self.settings, ControlSettings):
-            raise ValueError("ControlPolicy.settings: expected ControlSettings")
-        f = self.uncertainty_factor
-        if isinstance(f, bool) or not (math.isfinite(f) and f >= 0):
-            raise ValueError(f"ControlPolicy.uncertainty_factor: must be >= 0, got {f!r}")
-        r = self.restart_after
-        if isinstance(r, bool) or not isinstance(r, int) or r < 0:
-            raise ValueError(f"ControlPolicy.restart_after: expected an integer >= 0, got {r!r}")
-        e = self.divergence_abort_error
-        if isinstance(e, bool) or not (math.isfinite(e) and e > 0):
-            raise ValueError(f"ControlPolicy.divergence_abort_error: must be > 0, got {e!r}")
-        if self.on_divergence not in ("abort", "record"):
-            raise ValueError(
-                f"ControlPolicy.on_divergence: expected 'abort' or 'record', "
-                f"got {self.on_divergence!r}"
-            )
+    #: The fields of ``settings`` sit in the file's ``[control]`` table itself ...
+    __flattened__: ClassVar[dict[str, type]] = {"settings": ControlSettings}
+    #: ... except these, which the plan sets from elsewhere.
+    __set_elsewhere__: ClassVar[dict[str, str]] = {
+        "orders": "excitation.orders",
+        "max_drive_v": "limits.drive_peak_v",
+    }
+
+    @model_validator(mode="before")
+    @classmethod
+    def _nest(cls, data: object) -> object:
+        """The flat ``[control]`` table of a file as the nested fields."""
+        if not isinstance(data, dict) or "settings" in data:
+            return data
+        for name, where in cls.__set_elsewhere__.items():
+            if name in data:
+                raise SettingError((name,), f"set by {where}, not here")
+        inner = set(ControlSettings.__pydantic_fields__)  # type: ignore[attr-defined]
+        nested = {k: v for k, v in data.items() if k in inner}
+        return {**{k: v for k, v in data.items() if k not in inner}, "settings": nested}
+
+    @model_serializer(mode="wrap")
+    def _flatten(self, handler):  # type: ignore[no-untyped-def]
+        data = handler(self)
+        settings = data.pop("settings")
+        return {**data, **{k: v for k, v in settings.items() if k not in self.__set_elsewhere__}}
 
 
 # ------------------------------------------------------------------------ limits and pretest
 
 
-@dataclass(frozen=True)
+def _limit(doc: str) -> Any:
+    return _doc(doc, None, gt=0)
+
+
+@settings()
 class ResponseLimit:
     """Alarm and abort limits of one channel (separate from the drive limit).
 
@@ -427,29 +381,16 @@ class ResponseLimit:
     An alarm warns once per step; an abort stops the run with the output ramped to 0 V. Peaks
     are checked on every block read; displacement is the acceleration integrated twice over the
     excited band.
-
-    Parameters
-    ----------
-    channel : str
-        Channel name ("" when ``point`` is given).
-    point : int
-        Measurement point (-1 when ``channel`` is given).
-    acceleration_alarm_m_s2, acceleration_abort_m_s2 : float, optional
-        Peak acceleration limits [m/s^2].
-    displacement_alarm_m, displacement_abort_m : float, optional
-        Peak displacement limits [m].
-    force_alarm_n, force_abort_n : float, optional
-        Peak force limits [N] (force channels).
     """
 
-    channel: str = ""
-    point: int = -1
-    acceleration_alarm_m_s2: float | None = None
-    acceleration_abort_m_s2: float | None = None
-    displacement_alarm_m: float | None = None
-    displacement_abort_m: float | None = None
-    force_alarm_n: float | None = None
-    force_abort_n: float | None = None
+    channel: Text = _doc('Channel name ("" when point is given).', "")
+    point: Integer = _doc("Measurement point (-1 when channel is given).", -1)
+    acceleration_alarm_m_s2: Number | None = _limit("Peak acceleration that warns [m/s^2].")
+    acceleration_abort_m_s2: Number | None = _limit("Peak acceleration that stops [m/s^2].")
+    displacement_alarm_m: Number | None = _limit("Peak displacement that warns [m].")
+    displacement_abort_m: Number | None = _limit("Peak displacement that stops [m].")
+    force_alarm_n: Number | None = _limit("Peak force that warns [N] (force channels).")
+    force_abort_n: Number | None = _limit("Peak force that stops [N] (force channels).")
 
     _PAIRS: ClassVar[tuple[tuple[str, str], ...]] = (
         ("acceleration_alarm_m_s2", "acceleration_abort_m_s2"),
@@ -458,21 +399,25 @@ class ResponseLimit:
     )
 
     def __post_init__(self) -> None:
-        owner = f"ResponseLimit {self.target}"
         if bool(self.channel) == (self.point >= 0):
-            raise ValueError("ResponseLimit: give either channel or point (not both, not neither)")
+            raise SettingError((), "give either channel or point (not both, not neither)")
         given = False
         for alarm, abort in self._PAIRS:
-            for name in (alarm, abort):
-                value = getattr(self, name)
-                if value is not None:
-                    _positive(owner, name, value)
-                    given = True
             a, b = getattr(self, alarm), getattr(self, abort)
+            given = given or a is not None or b is not None
             if a is not None and b is not None and a >= b:
-                raise ValueError(f"{owner}: {alarm} ({a}) must be below {abort} ({b})")
+                raise SettingError((alarm,), f"must be below {abort} ({b}), got {a}")
         if not given:
-            raise ValueError(f"{owner}: no limit given")
+            raise SettingError((), f"{self.target}: no limit given")
+
+    @model_serializer(mode="wrap")
+    def _only_the_target(self, handler):  # type: ignore[no-untyped-def]
+        """The file names the channel or the point, not the placeholder of the other."""
+        data = handler(self)
+        unset = ("point", -1) if self.channel else ("channel", "")
+        if data.get(unset[0]) == unset[1]:
+            del data[unset[0]]
+        return data
 
     @property
     def target(self) -> str:
@@ -480,134 +425,82 @@ class ResponseLimit:
         return f"channel {self.channel!r}" if self.channel else f"point {self.point}"
 
 
-@dataclass(frozen=True)
+@settings()
 class Limits:
-    """Safety limits of a run.
+    """Safety limits of a run."""
 
-    Parameters
-    ----------
-    drive_peak_v : float
-        Largest drive-waveform peak the run may apply [V] (below the setup's AO limit).
-    response : tuple of ResponseLimit
-        Per-channel alarm and abort limits.
-    """
-
-    drive_peak_v: float = 1.0
-    response: tuple[ResponseLimit, ...] = ()
-
-    def __post_init__(self) -> None:
-        _positive("Limits", "drive_peak_v", self.drive_peak_v)
-        object.__setattr__(self, "response", tuple(self.response))
+    drive_peak_v: Positive = _doc(
+        "Largest drive-waveform peak the run may apply [V] (below the setup's AO limit).", 1.0
+    )
+    response: tuple[ResponseLimit, ...] = _doc("Per-channel alarm and abort limits.", ())
 
 
-@dataclass(frozen=True)
+@settings()
 class PretestSettings:
-    """Checks before the test: noise floor, loop check, channel sanity.
+    """Checks before the test: noise floor, loop check, channel sanity."""
 
-    Parameters
-    ----------
-    enabled : bool
-        Run the pretest (without it the first step starts from ``loop_check``-free defaults).
-    noise_s : float
-        Length of the noise-floor record at 0 V [s].
-    loop_check_drive_v : float
-        Drive amplitude of every order in the low-level loop check [V] (stepped sine).
-    loop_check_frequency_hz : float
-        Fundamental of the loop check [Hz]; 0: the plan's first frequency.
-    min_snr : float
-        A channel whose response to the loop check is below this many noise standard errors
-        is reported as not responding.
-    """
-
-    enabled: bool = True
-    noise_s: float = 1.0
-    loop_check_drive_v: float = 0.02
-    loop_check_frequency_hz: float = 0.0
-    min_snr: float = 5.0
-
-    def __post_init__(self) -> None:
-        for name in ("noise_s", "loop_check_drive_v", "min_snr"):
-            _positive("PretestSettings", name, getattr(self, name))
-        f = self.loop_check_frequency_hz
-        if not (math.isfinite(f) and f >= 0):
-            raise ValueError(f"PretestSettings.loop_check_frequency_hz: must be >= 0, got {f}")
+    enabled: Flag = _doc(
+        "Run the pretest (without it the first step starts from loop-check-free defaults).",
+        True,
+    )
+    noise_s: Positive = _doc("Length of the noise-floor record at 0 V [s].", 1.0)
+    loop_check_drive_v: Positive = _doc(
+        "Drive amplitude of every order in the low-level loop check [V] (stepped sine).", 0.02
+    )
+    loop_check_frequency_hz: NonNegative = _doc(
+        "Fundamental of the loop check [Hz]; 0: the plan's first frequency.", 0.0
+    )
+    min_snr: Positive = _doc(
+        "A channel whose response to the loop check is below this many noise standard errors "
+        "is reported as not responding.",
+        5.0,
+    )
 
 
-@dataclass(frozen=True)
+@settings()
 class RandomExcitation:
-    """Band-limited random force of the linear test.
+    """Band-limited random force of the linear test."""
 
-    Parameters
-    ----------
-    f_lo_hz, f_hi_hz : float
-        Excited band [Hz].
-    force_rms_n : float
-        RMS drive force aimed at [N] (low, so that the gap never closes).
-    signal : {"periodic", "gaussian"}
-        Periodic random (flat spectrum, random phases; leakage-free with a rectangular window)
-        or Gaussian random.
-    record_s : float
-        Length of one record (one period of the drive) [s]; the frequency resolution of a
-        periodic-random test is ``1 / record_s``.
-    seed : int
-        Random state of the drive.
-    calibration_drive_rms_v : float
-        RMS drive of the short record that measures the force per volt [V].
-    """
-
-    f_lo_hz: float = 10.0
-    f_hi_hz: float = 200.0
-    force_rms_n: float = 0.3
-    signal: str = "periodic"
-    record_s: float = 8.0
-    seed: int = 1
-    calibration_drive_rms_v: float = 0.003
+    f_lo_hz: Positive = _doc("Lower edge of the excited band [Hz].", 10.0)
+    f_hi_hz: Positive = _doc("Upper edge of the excited band [Hz].", 200.0)
+    force_rms_n: Positive = _doc(
+        "RMS drive force aimed at [N] (low, so that the gap never closes).", 0.3
+    )
+    signal: RandomKind = _doc(
+        "Periodic random (flat spectrum, random phases; leakage-free with a rectangular "
+        "window) or Gaussian random.",
+        "periodic",
+    )
+    record_s: Positive = _doc(
+        "Length of one record (one period of the drive) [s]; the frequency resolution of a "
+        "periodic-random test is 1 / record_s.",
+        8.0,
+    )
+    seed: Integer = _doc("Random state of the drive.", 1, ge=0)
+    calibration_drive_rms_v: Positive = _doc(
+        "RMS drive of the short record that measures the force per volt [V].", 0.003
+    )
 
     def __post_init__(self) -> None:
-        owner = "RandomExcitation"
-        for name in ("f_lo_hz", "f_hi_hz", "force_rms_n", "record_s", "calibration_drive_rms_v"):
-            _positive(owner, name, getattr(self, name))
         if self.f_hi_hz <= self.f_lo_hz:
-            raise ValueError(f"{owner}: f_hi_hz ({self.f_hi_hz}) must exceed f_lo_hz")
-        if self.signal not in RANDOM_KINDS:
-            raise ValueError(f"{owner}.signal: expected one of {RANDOM_KINDS}, got {self.signal!r}")
-        _at_least(owner, "seed", self.seed, 0)
+            raise SettingError(
+                ("f_hi_hz",), f"must exceed f_lo_hz ({self.f_lo_hz}), got {self.f_hi_hz}"
+            )
 
 
-@dataclass(frozen=True)
+@settings()
 class RandomAcquisition:
-    """Records and spectral averaging of the random test.
+    """Records and spectral averaging of the random test."""
 
-    Parameters
-    ----------
-    settle_records : int
-        Records discarded after the drive starts (the transient).
-    average_records : int
-        Records acquired for the H1 estimate.
-    window : str
-        Window of the Welch average (``"boxcar"`` for periodic random).
-    overlap : float
-        Segment overlap, fraction in [0, 1).
-    segments_per_record : int
-        Welch segments per record (1: one segment is one record).
-    ramp_s : float
-        Fade in and out of the drive [s].
-    """
-
-    settle_records: int = 1
-    average_records: int = 8
-    window: str = "boxcar"
-    overlap: float = 0.0
-    segments_per_record: int = 1
-    ramp_s: float = 0.2
-
-    def __post_init__(self) -> None:
-        owner = "RandomAcquisition"
-        _at_least(owner, "settle_records", self.settle_records, 0)
-        _at_least(owner, "average_records", self.average_records, 1)
-        _at_least(owner, "segments_per_record", self.segments_per_record, 1)
-        if not (math.isfinite(self.overlap) and 0 <= self.overlap < 1):
-            raise ValueError(f"{owner}.overlap: must be in [0, 1), got {self.overlap}")
-        if not isinstance(self.window, str) or not self.window:
-            raise ValueError(f"{owner}.window: expected a window name, got {self.window!r}")
-        _positive(owner, "ramp_s", self.ramp_s)
+    settle_records: Integer = _doc(
+        "Records discarded after the drive starts (the transient).", 1, ge=0
+    )
+    average_records: Integer = _doc("Records acquired for the H1 estimate.", 8, ge=1)
+    window: Text = _doc(
+        'Window of the Welch average ("boxcar" for periodic random).', "boxcar", min_length=1
+    )
+    overlap: Number = _doc("Segment overlap, fraction in [0, 1).", 0.0, ge=0, lt=1)
+    segments_per_record: Integer = _doc(
+        "Welch segments per record (1: one segment is one record).", 1, ge=1
+    )
+    ramp_s: Positive = _doc("Fade in and out of the drive [s].", 0.2)

@@ -9,12 +9,12 @@ has the file layout).
 from __future__ import annotations
 
 import dataclasses
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from fractions import Fraction
-from typing import Any, ClassVar
+from typing import Annotated, Any, ClassVar
 
 import numpy as np
+from pydantic import Field
 
 from rig.config.plan_settings import (
     MAX_PLAN_STEPS,
@@ -28,6 +28,7 @@ from rig.config.plan_settings import (
     RandomAcquisition,
     RandomExcitation,
 )
+from rig.config.settings import Integer, Number, SettingError, Text, dump, settings
 
 __all__ = ["Plan", "PlannedStep", "RandomPlan", "SteppedSinePlan"]
 
@@ -62,62 +63,66 @@ class PlannedStep:
     first_of_sweep: bool
 
 
-def _check_common(owner: str, name: str, setup: str, points: tuple[int, ...], sr: float) -> None:
-    if not isinstance(name, str) or not name.strip():
-        raise ValueError(f"{owner}.name: expected a non-empty name, got {name!r}")
-    if not isinstance(setup, str) or not setup.strip():
-        raise ValueError(f"{owner}.setup: expected a setup name or file, got {setup!r}")
-    if not points or any(isinstance(p, bool) or not isinstance(p, int) or p < 0 for p in points):
-        raise ValueError(f"{owner}.points: expected point numbers >= 0, got {points!r}")
-    if len(set(points)) != len(points):
-        raise ValueError(f"{owner}.points: points repeat: {list(points)}")
-    if not (math.isfinite(sr) and sr >= 0):
-        raise ValueError(f"{owner}.sample_rate_hz: must be >= 0 (0: the setup's), got {sr}")
+Name = Annotated[Text, Field(min_length=1, pattern=r"\S", description="Name of the plan.")]
+Description = Annotated[Text, Field(description="What the plan is for.")]
+SetupName = Annotated[
+    Text,
+    Field(min_length=1, pattern=r"\S", description="Built-in setup name or setup file expected."),
+]
+Points = Annotated[
+    tuple[Annotated[Integer, Field(ge=0)], ...],
+    Field(
+        min_length=1,
+        description="Accelerometer points recorded (the drive force is always recorded).",
+    ),
+]
+SampleRate = Annotated[Number, Field(ge=0, description="Sample rate [Hz]; 0 uses the setup's.")]
 
 
-@dataclass(frozen=True)
-class SteppedSinePlan:
-    """A force-controlled stepped multi-sine test.
+@settings(kw_only=True)
+class _PlanBase:
+    """What every kind of plan has."""
 
-    Parameters
-    ----------
-    name, description : str
-    setup : str
-        Built-in setup name or setup file the plan expects.
-    points : tuple of int
-        Accelerometer points recorded (the drive force is always recorded).
-    excitation : ExcitationSettings
-    frequencies : FrequencyPlan
-    acquisition : AcquisitionSettings
-    control : ControlPolicy
-    limits : Limits
-    pretest : PretestSettings
-    sample_rate_hz : float
-        Sample rate [Hz]; 0 uses the setup's.
-    """
+    name: Name
+    points: Points
+    description: Description = ""
+    setup: SetupName = "reference"
+    limits: Limits = Field(default_factory=Limits)
+    pretest: PretestSettings = Field(default_factory=PretestSettings)
+    sample_rate_hz: SampleRate = 0.0
 
-    name: str
-    description: str
-    setup: str
-    points: tuple[int, ...]
+    kind: ClassVar[str]
+
+    def __post_init__(self) -> None:
+        if len(set(self.points)) != len(self.points):
+            raise SettingError(("points",), f"points repeat: {list(self.points)}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (the file's ``config_json``); :func:`plan_from_dict` reads it back."""
+        data = dump(self)
+        return {"name": data.pop("name"), "kind": self.kind, **data}
+
+
+@settings(kw_only=True)
+class SteppedSinePlan(_PlanBase):
+    """A force-controlled stepped multi-sine test (the file layout is in
+    :mod:`rig.config.plans`)."""
+
     excitation: ExcitationSettings
     frequencies: FrequencyPlan
-    acquisition: AcquisitionSettings = field(default_factory=AcquisitionSettings)
-    control: ControlPolicy = field(default_factory=ControlPolicy)
-    limits: Limits = field(default_factory=Limits)
-    pretest: PretestSettings = field(default_factory=PretestSettings)
-    sample_rate_hz: float = 0.0
+    acquisition: AcquisitionSettings = Field(default_factory=AcquisitionSettings)
+    control: ControlPolicy = Field(default_factory=ControlPolicy)
 
     kind: ClassVar[str] = "stepped-sine"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "points", tuple(self.points))
-        _check_common("SteppedSinePlan", self.name, self.setup, self.points, self.sample_rate_hz)
+        super().__post_init__()
         n = self.step_count_bound()
         if n > MAX_PLAN_STEPS:
             raise PlanTooLarge(
+                (),
                 f"plan {self.name!r} has {n:,} steps, more than the maximum of "
-                f"{MAX_PLAN_STEPS:,} (levels x sweeps x frequencies): check its step_hz"
+                f"{MAX_PLAN_STEPS:,} (levels x sweeps x frequencies): check its step_hz",
             )
         s = self.control.settings
         if s.orders != self.excitation.orders or s.max_drive_v != self.limits.drive_peak_v:
@@ -166,100 +171,20 @@ class SteppedSinePlan:
         spec = self.excitation.spec
         return np.array([spec.force_targets(level) for level in self.excitation.levels_n])
 
-    def to_dict(self) -> dict[str, Any]:
-        """Plain data (the file's ``config_json``); :func:`plan_from_dict` reads it back."""
-        ex = self.excitation
-        control = {
-            k: v
-            for k, v in dataclasses.asdict(self.control.settings).items()
-            if k not in ("orders", "max_drive_v")
-        }
-        return {
-            "name": self.name,
-            "kind": self.kind,
-            "description": self.description,
-            "setup": self.setup,
-            "points": list(self.points),
-            "sample_rate_hz": self.sample_rate_hz,
-            "excitation": {
-                "orders": [str(o) for o in ex.orders],
-                "relative_amplitudes": list(ex.relative_amplitudes),
-                "phases_deg": list(ex.phases_deg),
-                "levels_n": list(ex.levels_n),
-            },
-            "frequencies": {
-                "direction": self.frequencies.direction,
-                "ranges": [dataclasses.asdict(r) for r in self.frequencies.ranges],
-            },
-            "acquisition": dataclasses.asdict(self.acquisition),
-            "control": {
-                "uncertainty_factor": self.control.uncertainty_factor,
-                "warm_start": self.control.warm_start,
-                "on_divergence": self.control.on_divergence,
-                "divergence_abort_error": self.control.divergence_abort_error,
-                "restart_after": self.control.restart_after,
-                **control,
-            },
-            "limits": _limits_dict(self.limits),
-            "pretest": dataclasses.asdict(self.pretest),
-        }
 
+@settings(kw_only=True)
+class RandomPlan(_PlanBase):
+    """A low-level random test giving H1 FRFs and coherence of every channel."""
 
-@dataclass(frozen=True)
-class RandomPlan:
-    """A low-level random test giving H1 FRFs and coherence of every channel.
-
-    Parameters are those of :class:`SteppedSinePlan` where shared, with
-    :class:`RandomExcitation` and :class:`RandomAcquisition`.
-    """
-
-    name: str
-    description: str
-    setup: str
-    points: tuple[int, ...]
-    excitation: RandomExcitation = field(default_factory=RandomExcitation)
-    acquisition: RandomAcquisition = field(default_factory=RandomAcquisition)
-    limits: Limits = field(default_factory=Limits)
-    pretest: PretestSettings = field(default_factory=PretestSettings)
-    sample_rate_hz: float = 0.0
+    excitation: RandomExcitation = Field(default_factory=RandomExcitation)
+    acquisition: RandomAcquisition = Field(default_factory=RandomAcquisition)
 
     kind: ClassVar[str] = "random"
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "points", tuple(self.points))
-        _check_common("RandomPlan", self.name, self.setup, self.points, self.sample_rate_hz)
 
     @property
     def n_steps(self) -> int:
         """Records acquired (calibration, settling and averaged)."""
         return 1 + self.acquisition.settle_records + self.acquisition.average_records
 
-    def to_dict(self) -> dict[str, Any]:
-        """Plain data (the file's ``config_json``); :func:`plan_from_dict` reads it back."""
-        return {
-            "name": self.name,
-            "kind": self.kind,
-            "description": self.description,
-            "setup": self.setup,
-            "points": list(self.points),
-            "sample_rate_hz": self.sample_rate_hz,
-            "excitation": dataclasses.asdict(self.excitation),
-            "acquisition": dataclasses.asdict(self.acquisition),
-            "limits": _limits_dict(self.limits),
-            "pretest": dataclasses.asdict(self.pretest),
-        }
-
 
 Plan = SteppedSinePlan | RandomPlan
-
-
-def _limits_dict(limits: Limits) -> dict[str, Any]:
-    response = []
-    for r in limits.response:
-        d = {k: v for k, v in dataclasses.asdict(r).items() if v is not None}
-        if not d.get("channel"):
-            d.pop("channel", None)
-        if d.get("point", -1) < 0:
-            d.pop("point", None)
-        response.append(d)
-    return {"drive_peak_v": limits.drive_peak_v, "response": response}

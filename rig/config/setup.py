@@ -4,8 +4,8 @@ A setup describes what is on the bench (which sensor sits where, with which sens
 serial number and calibration date; the DAQ's clock and channels; the amplifier's serial port);
 a plan (:mod:`rig.config.plans`) says what to do with it and names the setup it expects. Setups are
 TOML files; the built-in ``reference`` setup (``rig/setups/reference.toml``) is the paper's rig.
-Every setting is a frozen dataclass validated on construction; loading a file reports the file
-and the key of any problem.
+Every setting is declared once (:mod:`rig.config.settings`) in a frozen dataclass validated on
+construction; loading a file reports the file and the key path of any problem.
 
 Layout of a setup file::
 
@@ -34,16 +34,26 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
-import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal, get_args
+
+from pydantic import AfterValidator, BeforeValidator, Field
 
 from analysis.measurement_file import Actuator, ChannelInfo
 from rig.backends.protocol import AcquisitionConfig, AIChannelConfig, AOChannelConfig
-from rig.config.tomlconfig import ConfigError, Table, read_toml
+from rig.config.settings import (
+    Flag,
+    Integer,
+    Number,
+    SettingError,
+    Text,
+    build,
+    dump,
+    settings,
+)
+from rig.config.tomlconfig import ConfigError, read_toml
 
 __all__ = [
     "AmplifierSetup",
@@ -58,123 +68,87 @@ __all__ = [
 
 QUANTITY_UNITS = {"force": "N", "acceleration": "m/s^2", "voltage": "V"}
 SENSITIVITY_UNITS = {"force": "mV/N", "acceleration": "mV/g", "voltage": "V/V"}
-ROLES = ("drive-force", "drive-acceleration", "response", "reference")
+Quantity = Literal["force", "acceleration", "voltage"]
+Role = Literal["drive-force", "drive-acceleration", "response", "reference"]
+ROLES: tuple[str, ...] = get_args(Role)
 AXES = ("x", "y", "z")
 
 
-def _check_positive(owner: str, name: str, value: float) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ValueError(f"{owner}.{name}: expected a number, got {value!r}")
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{owner}.{name}: must be finite and > 0, got {value!r}")
-
-
-def _check_direction(owner: str, value: str) -> None:
-    if not isinstance(value, str) or value.lstrip("-") not in AXES or value.count("-") > 1:
+def _direction(value: str) -> str:
+    if value.lstrip("-") not in AXES or value.count("-") > 1:
         raise ValueError(
-            f"{owner}.direction: expected x, y or z (with a leading '-' for a reversed axis), "
-            f"got {value!r}"
+            f"expected x, y or z (with a leading '-' for a reversed axis), got {value!r}"
         )
+    return value
 
 
-@dataclass(frozen=True)
+def _iso_date(value: object) -> object:
+    return value.isoformat() if isinstance(value, datetime.date) else value  # a TOML date
+
+
+def _check_date(value: str) -> str:
+    if value:
+        try:
+            datetime.date.fromisoformat(value)
+        except ValueError:
+            raise ValueError(f"expected YYYY-MM-DD, got {value!r}") from None
+    return value
+
+
+def _doc(doc: str, default: Any = ..., **bounds: Any) -> Any:
+    return Field(default, description=doc, **bounds)
+
+
+Name = Annotated[Text, Field(min_length=1, pattern=r"\S")]
+Axis = Annotated[Text, AfterValidator(_direction)]
+Positive = Annotated[Number, Field(gt=0)]
+NonNegative = Annotated[Number, Field(ge=0)]
+
+
+@settings(kw_only=True)
 class ChannelSetup:
-    """One acquired channel and the sensor on it.
+    """One acquired channel and the sensor on it."""
 
-    Parameters
-    ----------
-    name : str
-        Unique channel name (the name in the measurement file).
-    physical : str
-        DAQ channel, e.g. ``"cDAQ1Mod1/ai0"``.
-    quantity : {"force", "acceleration", "voltage"}
-        What the channel measures; data are in N, m/s^2 or V.
-    point : int
-        Measurement point the sensor sits on (0 for a voltage channel).
-    direction : str
-        Sensor axis, ``"x"``, ``"y"`` or ``"z"`` (``"-y"``: mounted reversed).
-    sensitivity : float
-        Sensor sensitivity in ``sensitivity_unit`` (mV/N, mV/g or V/V).
-    sensitivity_unit : str
-        ``"mV/N"`` for force, ``"mV/g"`` for acceleration, ``"V/V"`` for voltage.
-    range_v : float
-        Input range of the ADC [V] (symmetric).
-    output_swing_v : float
-        The sensor's output swing [V] from its data sheet (a 10 mV/g accelerometer rated
-        +-500 g swings +-5 V); 0 when not known, the input range is then taken to hold it. The
-        saturation check (:mod:`rig.run.safety`) judges a flat-topped waveform against the smaller
-        of the two.
-    role : {"drive-force", "drive-acceleration", "response", "reference"}
-        ``drive-force``: the force gauge at the drive point (exactly one per setup).
-    iepe : bool
-        Powered by constant-current (IEPE) excitation, AC coupled.
-    model, serial : str
-        Sensor model and serial number.
-    calibration_date : str
-        Date of the sensor's last calibration, ISO ``YYYY-MM-DD`` (empty if unknown).
-    mass_kg : float
-        Sensor mass added to the structure at ``point`` [kg] (0 when already counted, e.g.
-        the acceleration half of an impedance head).
-    """
-
-    name: str
-    physical: str
-    quantity: str
-    point: int
-    direction: str
-    sensitivity: float
-    sensitivity_unit: str
-    range_v: float = 5.0
-    output_swing_v: float = 0.0
-    role: str = "response"
-    iepe: bool = True
-    model: str = ""
-    serial: str = ""
-    calibration_date: str = ""
-    mass_kg: float = 0.0
+    name: Name = _doc("Unique channel name (the name in the measurement file).")
+    physical: Name = _doc('DAQ channel, e.g. "cDAQ1Mod1/ai0".')
+    quantity: Quantity = _doc("What the channel measures; data are in N, m/s^2 or V.")
+    point: Integer = _doc(
+        "Measurement point the sensor sits on (0 for a voltage channel).", 0, ge=0
+    )
+    direction: Axis = _doc('Sensor axis, "x", "y" or "z" ("-y": mounted reversed).', "y")
+    sensitivity: Positive = _doc("Sensor sensitivity in sensitivity_unit (mV/N, mV/g or V/V).")
+    sensitivity_unit: Text = _doc('"mV/N" for force, "mV/g" for acceleration, "V/V" for voltage.')
+    range_v: Positive = _doc("Input range of the ADC [V] (symmetric).", 5.0)
+    output_swing_v: NonNegative = _doc(
+        "The sensor's output swing [V] from its data sheet (a 10 mV/g accelerometer rated "
+        "+-500 g swings +-5 V); 0 when not known, the input range is then taken to hold it. "
+        "The saturation check judges a flat-topped waveform against the smaller of the two.",
+        0.0,
+    )
+    role: Role = _doc(
+        "drive-force: the force gauge at the drive point (exactly one per setup).", "response"
+    )
+    iepe: Flag = _doc("Powered by constant-current (IEPE) excitation, AC coupled.", True)
+    model: Text = _doc("Sensor model.", "")
+    serial: Text = _doc("Sensor serial number.", "")
+    calibration_date: Annotated[Text, BeforeValidator(_iso_date), AfterValidator(_check_date)] = (
+        _doc("Date of the sensor's last calibration, YYYY-MM-DD (empty if unknown).", "")
+    )
+    mass_kg: NonNegative = _doc(
+        "Sensor mass added to the structure at point [kg] (0 when already counted, e.g. the "
+        "acceleration half of an impedance head).",
+        0.0,
+    )
 
     def __post_init__(self) -> None:
-        owner = f"ChannelSetup {self.name!r}"
-        if not isinstance(self.name, str) or not self.name.strip():
-            raise ValueError(f"ChannelSetup.name: expected a non-empty string, got {self.name!r}")
-        if not isinstance(self.physical, str) or not self.physical.strip():
-            raise ValueError(f"{owner}.physical: expected a DAQ channel like 'Dev1/ai0'")
-        if self.quantity not in QUANTITY_UNITS:
-            raise ValueError(
-                f"{owner}.quantity: expected one of {tuple(QUANTITY_UNITS)}, got {self.quantity!r}"
-            )
-        if isinstance(self.point, bool) or not isinstance(self.point, int) or self.point < 0:
-            raise ValueError(f"{owner}.point: expected an integer >= 0, got {self.point!r}")
-        _check_direction(owner, self.direction)
-        _check_positive(owner, "sensitivity", self.sensitivity)
         expected = SENSITIVITY_UNITS[self.quantity]
         if self.sensitivity_unit != expected:
-            raise ValueError(
-                f"{owner}.sensitivity_unit: a {self.quantity} channel needs {expected!r}, "
-                f"got {self.sensitivity_unit!r}"
+            raise SettingError(
+                ("sensitivity_unit",),
+                f"a {self.quantity} channel needs {expected!r}, got {self.sensitivity_unit!r}",
             )
-        _check_positive(owner, "range_v", self.range_v)
-        if not (math.isfinite(self.output_swing_v) and self.output_swing_v >= 0):
-            raise ValueError(
-                f"{owner}.output_swing_v: must be >= 0 (0: not known), got {self.output_swing_v!r}"
-            )
-        if self.role not in ROLES:
-            raise ValueError(f"{owner}.role: expected one of {ROLES}, got {self.role!r}")
         if self.role == "drive-force" and self.quantity != "force":
-            raise ValueError(f"{owner}.role: a 'drive-force' channel must measure force")
-        if self.calibration_date:
-            try:
-                datetime.date.fromisoformat(self.calibration_date)
-            except (TypeError, ValueError):
-                raise ValueError(
-                    f"{owner}.calibration_date: expected YYYY-MM-DD, got {self.calibration_date!r}"
-                ) from None
-        if not (math.isfinite(self.mass_kg) and self.mass_kg >= 0):
-            raise ValueError(f"{owner}.mass_kg: must be >= 0, got {self.mass_kg!r}")
-        object.__setattr__(self, "sensitivity", float(self.sensitivity))
-        object.__setattr__(self, "range_v", float(self.range_v))
-        object.__setattr__(self, "output_swing_v", float(self.output_swing_v))
-        object.__setattr__(self, "mass_kg", float(self.mass_kg))
+            raise SettingError(("role",), "a 'drive-force' channel must measure force")
 
     @property
     def unit(self) -> str:
@@ -232,154 +206,98 @@ class ChannelSetup:
         )
 
 
-@dataclass(frozen=True)
+@settings()
 class DaqSetup:
-    """The acquisition device.
+    """The acquisition device."""
 
-    Parameters
-    ----------
-    device : str
-        NI device (or cDAQ chassis) name; also the name the device lock uses.
-    sample_rate_hz : float
-        Sample rate of output and inputs [Hz] (a plan may ask for another).
-    buffer_s : float
-        Input buffer length [s].
-    watchdog_s : float
-        Hardware watchdog timeout of the drive output [s] where the device has one.
-    """
-
-    device: str = "Dev1"
-    sample_rate_hz: float = 25600.0
-    buffer_s: float = 10.0
-    watchdog_s: float = 1.0
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.device, str) or not self.device.strip():
-            raise ValueError(f"DaqSetup.device: expected a device name, got {self.device!r}")
-        for name in ("sample_rate_hz", "buffer_s", "watchdog_s"):
-            _check_positive("DaqSetup", name, getattr(self, name))
+    device: Name = _doc(
+        "NI device (or cDAQ chassis) name; also the name the device lock uses.", "Dev1"
+    )
+    sample_rate_hz: Positive = _doc(
+        "Sample rate of output and inputs [Hz] (a plan may ask for another).", 25600.0
+    )
+    buffer_s: Positive = _doc("Input buffer length [s].", 10.0)
+    watchdog_s: Positive = _doc(
+        "Hardware watchdog timeout of the drive output [s] where the device has one.", 1.0
+    )
 
 
-@dataclass(frozen=True)
+@settings(kw_only=True)
 class DriveSetup:
-    """The drive output and where the shaker pushes.
+    """The drive output and where the shaker pushes."""
 
-    Parameters
-    ----------
-    physical : str
-        AO channel to the amplifier input.
-    limit_v : float
-        Hard output limit of the AO channel [V]; plans set their own, lower, drive limit.
-    point : int
-        Measurement point of the shaker (the actuator).
-    direction : str
-        Direction the shaker pushes.
-    shaker : str
-        Shaker and stinger, for the record.
-    static_stiffness_n_per_m : float
-        Stiffness with which the shaker holds the drive point at its mean position: the
-        armature suspension in series with the stinger [N/m] (0: unknown or negligible). It
-        goes into the measurement file (the mean force is not measured) so that a model can
-        place the mean response of a structure with a one-sided contact.
-    """
-
-    physical: str = "Dev1/ao0"
-    limit_v: float = 5.0
-    point: int = 3
-    direction: str = "y"
-    shaker: str = ""
-    static_stiffness_n_per_m: float = 0.0
-
-    def __post_init__(self) -> None:
-        _check_positive("DriveSetup", "limit_v", self.limit_v)
-        if self.limit_v > 10:
-            raise ValueError(f"DriveSetup.limit_v: at most 10 V, got {self.limit_v}")
-        if isinstance(self.point, bool) or not isinstance(self.point, int) or self.point < 0:
-            raise ValueError(f"DriveSetup.point: expected an integer >= 0, got {self.point!r}")
-        _check_direction("DriveSetup", self.direction)
-        k = self.static_stiffness_n_per_m
-        if isinstance(k, bool) or not isinstance(k, int | float) or not (0 <= k < float("inf")):
-            raise ValueError(
-                f"DriveSetup.static_stiffness_n_per_m: expected a number >= 0 N/m, got {k!r}"
-            )
+    physical: Text = _doc("AO channel to the amplifier input.")
+    limit_v: Positive = _doc(
+        "Hard output limit of the AO channel [V]; plans set their own, lower, drive limit.",
+        le=10,
+    )
+    point: Integer = _doc("Measurement point of the shaker (the actuator).", ge=0)
+    direction: Axis = _doc("Direction the shaker pushes.", "y")
+    shaker: Text = _doc("Shaker and stinger, for the record.", "")
+    static_stiffness_n_per_m: NonNegative = _doc(
+        "Stiffness with which the shaker holds the drive point at its mean position: the "
+        "armature suspension in series with the stinger [N/m] (0: unknown or negligible); it "
+        "goes into the measurement file (the mean force is not measured) so that a model can "
+        "place the mean response of a structure with a one-sided contact.",
+        0.0,
+    )
 
 
-@dataclass(frozen=True)
+@settings()
 class AmplifierSetup:
-    """The power amplifier.
+    """The power amplifier."""
 
-    Parameters
-    ----------
-    port : str
-        Serial port (or pyserial URL) of its remote interface; empty: not remote controlled
-        (overloads are then seen only as a lost drive force).
-    gain_v_per_v : float
-        Gain to set at the start of a run [V/V]; 0 leaves the amplifier's gain as it is.
-    model, serial : str
-        For the record.
-    timeout_s : float
-        Reply timeout of the serial interface [s].
-    """
-
-    port: str = ""
-    gain_v_per_v: float = 0.0
-    model: str = ""
-    serial: str = ""
-    timeout_s: float = 1.0
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.gain_v_per_v) and self.gain_v_per_v >= 0):
-            raise ValueError(f"AmplifierSetup.gain_v_per_v: must be >= 0, got {self.gain_v_per_v}")
-        _check_positive("AmplifierSetup", "timeout_s", self.timeout_s)
+    port: Text = _doc(
+        "Serial port (or pyserial URL) of its remote interface; empty: not remote controlled "
+        "(overloads are then seen only as a lost drive force).",
+        "",
+    )
+    gain_v_per_v: NonNegative = _doc(
+        "Gain to set at the start of a run [V/V]; 0 leaves the amplifier's gain as it is.", 0.0
+    )
+    model: Text = _doc("Amplifier model, for the record.", "")
+    serial: Text = _doc("Amplifier serial number, for the record.", "")
+    timeout_s: Positive = _doc("Reply timeout of the serial interface [s].", 1.0)
 
 
-@dataclass(frozen=True)
+@settings(kw_only=True)
 class LabSetup:
-    """Everything on the bench.
+    """Everything on the bench (the file layout is in the module's docstring)."""
 
-    Parameters
-    ----------
-    name : str
-    description : str
-    daq : DaqSetup
-    drive : DriveSetup
-    amplifier : AmplifierSetup
-    channels : tuple of ChannelSetup
-        Every channel that can be acquired, in acquisition order; exactly one of role
-        ``"drive-force"``, at the drive point.
-    """
-
-    name: str
-    description: str
-    daq: DaqSetup
-    drive: DriveSetup
-    amplifier: AmplifierSetup
-    channels: tuple[ChannelSetup, ...]
+    name: Text = _doc("Name of the setup.")
+    description: Text = _doc("What the setup is.", "")
+    daq: DaqSetup = _doc("The acquisition device.", default_factory=DaqSetup)
+    drive: DriveSetup = _doc("The drive output and the drive point.")
+    amplifier: AmplifierSetup = _doc("The power amplifier.", default_factory=AmplifierSetup)
+    channels: tuple[ChannelSetup, ...] = _doc(
+        "Every channel that can be acquired, in acquisition order; exactly one of role "
+        "'drive-force', at the drive point.",
+        min_length=1,
+    )
 
     def __post_init__(self) -> None:
-        chans = tuple(self.channels)
-        if not chans:
-            raise ValueError("LabSetup.channels: at least one channel is needed")
+        chans = self.channels
         names = [c.name for c in chans]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
-            raise ValueError(f"LabSetup.channels: duplicate channel names {dup}")
+            raise SettingError(("channels",), f"duplicate channel names {dup}")
         phys = [c.physical for c in chans]
         dup = sorted({p for p in phys if phys.count(p) > 1})
         if dup:
-            raise ValueError(f"LabSetup.channels: physical channels used twice {dup}")
+            raise SettingError(("channels",), f"physical channels used twice {dup}")
         drive = [c for c in chans if c.role == "drive-force"]
         if len(drive) != 1:
-            raise ValueError(
-                "LabSetup.channels: exactly one channel of role 'drive-force' is needed, got "
-                f"{[c.name for c in drive] or 'none'}"
+            raise SettingError(
+                ("channels",),
+                "exactly one channel of role 'drive-force' is needed, got "
+                f"{[c.name for c in drive] or 'none'}",
             )
         if drive[0].point != self.drive.point:
-            raise ValueError(
-                f"LabSetup.channels: the drive-force channel {drive[0].name!r} is at point "
-                f"{drive[0].point}, the drive at point {self.drive.point}"
+            raise SettingError(
+                ("channels",),
+                f"the drive-force channel {drive[0].name!r} is at point {drive[0].point}, the "
+                f"drive at point {self.drive.point}",
             )
-        object.__setattr__(self, "channels", chans)
 
     # -- channel selection ----------------------------------------------------------------------
     @property
@@ -450,14 +368,7 @@ class LabSetup:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (the file's ``setup_json``; :func:`setup_from_dict` reads it back)."""
-        return {
-            "name": self.name,
-            "description": self.description,
-            "daq": dataclasses.asdict(self.daq),
-            "drive": dataclasses.asdict(self.drive),
-            "amplifier": dataclasses.asdict(self.amplifier),
-            "channels": [dataclasses.asdict(c) for c in self.channels],
-        }
+        return dump(self)
 
     def with_sample_rate(self, sample_rate_hz: float) -> LabSetup:
         """The same setup at another sample rate."""
@@ -466,90 +377,15 @@ class LabSetup:
         )
 
 
-_CHANNEL_KEYS = {
-    "name": ("text", ...),
-    "physical": ("text", ...),
-    "quantity": ("text", ...),
-    "point": ("integer", 0),
-    "direction": ("text", "y"),
-    "sensitivity": ("number", ...),
-    "sensitivity_unit": ("text", ...),
-    "range_v": ("number", 5.0),
-    "output_swing_v": ("number", 0.0),
-    "role": ("text", "response"),
-    "iepe": ("flag", True),
-    "model": ("text", ""),
-    "serial": ("text", ""),
-    "calibration_date": ("text", ""),
-    "mass_kg": ("number", 0.0),
-}
-
-
-def _channel(table: Table) -> ChannelSetup:
-    kwargs: dict[str, Any] = {}
-    for key, (kind, default) in _CHANNEL_KEYS.items():
-        getter = getattr(table, kind)
-        if key == "calibration_date" and isinstance(table.raw(key, ""), datetime.date):
-            kwargs[key] = table.raw(key).isoformat()  # a TOML date
-            continue
-        kwargs[key] = getter(key) if default is ... else getter(key, default)
-    table.finish()
-    return table.build(ChannelSetup, **kwargs)
-
-
 def setup_from_dict(data: Mapping[str, Any], source: str = "setup") -> LabSetup:
     """Build and validate a setup from parsed TOML or :meth:`LabSetup.to_dict` output.
 
     Raises
     ------
     ConfigError
-        Naming ``source`` and the key of the first problem.
+        Naming ``source`` and the key of the first problem (:attr:`ConfigError.path`).
     """
-    root = Table(data, source)
-    name = root.text("name")
-    description = root.text("description", "")
-    daq_t = root.table("daq")
-    daq = daq_t.build(
-        DaqSetup,
-        device=daq_t.text("device", "Dev1"),
-        sample_rate_hz=daq_t.number("sample_rate_hz", 25600.0, positive=True),
-        buffer_s=daq_t.number("buffer_s", 10.0, positive=True),
-        watchdog_s=daq_t.number("watchdog_s", 1.0, positive=True),
-    )
-    daq_t.finish()
-    drive_t = root.table("drive", required=True)
-    drive = drive_t.build(
-        DriveSetup,
-        physical=drive_t.text("physical"),
-        limit_v=drive_t.number("limit_v", positive=True),
-        point=drive_t.integer("point", minimum=0),
-        direction=drive_t.text("direction", "y"),
-        shaker=drive_t.text("shaker", ""),
-        static_stiffness_n_per_m=drive_t.number("static_stiffness_n_per_m", 0.0, minimum=0.0),
-    )
-    drive_t.finish()
-    amp_t = root.table("amplifier")
-    amplifier = amp_t.build(
-        AmplifierSetup,
-        port=amp_t.text("port", ""),
-        gain_v_per_v=amp_t.number("gain_v_per_v", 0.0, minimum=0.0),
-        model=amp_t.text("model", ""),
-        serial=amp_t.text("serial", ""),
-        timeout_s=amp_t.number("timeout_s", 1.0, positive=True),
-    )
-    amp_t.finish()
-    channels = tuple(_channel(t) for t in root.tables("channels", required=True))
-    root.finish()
-    return root.build(
-        LabSetup,
-        key="channels",
-        name=name,
-        description=description,
-        daq=daq,
-        drive=drive,
-        amplifier=amplifier,
-        channels=channels,
-    )
+    return build(LabSetup, data, source)
 
 
 def builtin_setups() -> dict[str, Path]:

@@ -17,13 +17,13 @@ from typing import Any
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from rig.config.tomlconfig import KeyPath, dotted
 from rig.gui.settings_fields import (
     Field,
     format_value,
     get_key,
     parse_value,
     put_key,
-    strip_index,
 )
 from rig.gui.style import ALARM
 
@@ -339,17 +339,22 @@ class SettingsForm(QtWidgets.QWidget):
             if entry.rows is not None:
                 entry.rows.mark_row(None)
 
-    def show_error(self, path: str, problem: str) -> str:
-        """Show ``problem`` next to the entry ``path`` names; returns the key used ("" when
-        no entry matches: the message then heads the form)."""
-        plain, row = strip_index(path)
-        parts = plain.split(".") if plain else []
+    def show_error(self, path: str | KeyPath, problem: str) -> str:
+        """Show ``problem`` next to the entry the key path names (a tuple, or dotted text
+        without indices); returns the key used ("" when no entry matches: the message then
+        heads the form)."""
+        if isinstance(path, str):
+            path = tuple(path.split(".")) if path else ()
+        parts = [p for p in path if isinstance(p, str)]
+        rows = [p for p in path if isinstance(p, int)]
+        row = rows[0] if rows else None
         for n in range(len(parts), 0, -1):
             key = ".".join(parts[:n])
             entry = self._entries.get(key)
             if entry is None:
                 continue
-            where = path[len(key) - len(key.rsplit(".", 1)[-1]) :] if path.startswith(key) else path
+            # from the entry's own name on: "levels_n[1]", "ranges[0].stop_hz"
+            where = dotted(path[path.index(parts[n - 1]) :])
             entry.error.setText(f"{where}: {problem}")
             entry.error.show()
             if entry.section in self.collapsible:
@@ -359,7 +364,7 @@ class SettingsForm(QtWidgets.QWidget):
             else:
                 entry.widget.setStyleSheet(f"border: 2px solid {ALARM};")
             return key
-        self.general_error.setText(f"{path}: {problem}" if path else problem)
+        self.general_error.setText(f"{dotted(path)}: {problem}" if path else problem)
         self.general_error.show()
         return ""
 

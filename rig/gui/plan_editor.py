@@ -1,11 +1,9 @@
 """The plan editor: frequency ranges, levels, orders, acquisition, control, limits, pretest.
 
-The form's sections are generated from the plan's settings dataclasses
-(:mod:`rig.config.plan_settings`, :class:`rig.procedures.force_control.ControlSettings`); the plan
-is
-built with :func:`rig.config.plans.plan_from_dict`, the reader of plan files, so the form accepts
-what
-a plan file accepts and says what is wrong the way the loader says it.
+The form's sections, kinds, choices and tooltips are generated from the plan's declared settings
+(:mod:`rig.config.plan_settings`); the plan is built with :func:`rig.config.plans.plan_from_dict`,
+the reader of plan files, so the form accepts what a plan file accepts and shows an error at the
+key path it carries.
 """
 
 from __future__ import annotations
@@ -15,10 +13,10 @@ from pathlib import Path
 from typing import Any
 
 from rig.config.plan_settings import (
-    DIRECTIONS,
     AcquisitionSettings,
     ControlPolicy,
     ExcitationSettings,
+    FrequencyPlan,
     FrequencyRange,
     Limits,
     PretestSettings,
@@ -27,7 +25,6 @@ from rig.config.plan_settings import (
     ResponseLimit,
 )
 from rig.config.plans import (
-    ControlSettings,
     Plan,
     SteppedSinePlan,
     builtin_plans,
@@ -38,20 +35,13 @@ from rig.config.plans import (
 from rig.gui.forms import RowsTable, SettingsForm
 from rig.gui.settings_editor import SettingsEditor
 from rig.gui.settings_fields import Field, dataclass_fields
-from rig.signals.random import RANDOM_KINDS
 
 __all__ = ["PlanEditor"]
 
-_NESTED = ("excitation", "frequencies", "acquisition", "control", "limits", "pretest")
-
 
 def _general() -> list[Field]:
-    return dataclass_fields(
-        SteppedSinePlan,
-        skip=_NESTED,
-        kinds={"name": "text", "description": "text", "setup": "text", "points": "integers"},
-        labels={"setup": "setup expected", "points": "points recorded"},
-    )
+    labels = {"setup": "setup expected", "points": "points recorded"}
+    return dataclass_fields(SteppedSinePlan, labels=labels)
 
 
 def _limits(form: SettingsForm) -> None:
@@ -65,38 +55,19 @@ def _limits(form: SettingsForm) -> None:
 
 def stepped_form() -> SettingsForm:
     """The form of a stepped-sine plan."""
-    control = dataclass_fields(
-        ControlPolicy,
-        "control",
-        skip=("settings",),
-        choices={"on_divergence": ("abort", "record")},
-    ) + dataclass_fields(ControlSettings, "control", skip=("orders", "max_drive_v"))
     form = SettingsForm(
         [
             ("Plan", _general()),
-            (
-                "Excitation",
-                dataclass_fields(
-                    ExcitationSettings,
-                    "excitation",
-                    kinds={"orders": "words", "phases_deg": "numbers"},
-                ),
-            ),
+            ("Excitation", dataclass_fields(ExcitationSettings, "excitation")),
             (
                 "Frequencies",
-                [
-                    Field(
-                        "frequencies.direction",
-                        "sweep direction",
-                        "choice",
-                        DIRECTIONS,
-                        "sweep direction at each level",
-                    )
-                ],
+                dataclass_fields(
+                    FrequencyPlan, "frequencies", labels={"direction": "sweep direction"}
+                ),
             ),
-            ("Limits", dataclass_fields(Limits, "limits", skip=("response",))),
+            ("Limits", dataclass_fields(Limits, "limits")),
             ("Acquisition", dataclass_fields(AcquisitionSettings, "acquisition")),
-            ("Force control", control),
+            ("Force control", dataclass_fields(ControlPolicy, "control")),
             ("Pre-test", dataclass_fields(PretestSettings, "pretest")),
         ]
     )
@@ -115,13 +86,8 @@ def random_form() -> SettingsForm:
     form = SettingsForm(
         [
             ("Plan", _general()),
-            (
-                "Excitation",
-                dataclass_fields(
-                    RandomExcitation, "excitation", choices={"signal": tuple(RANDOM_KINDS)}
-                ),
-            ),
-            ("Limits", dataclass_fields(Limits, "limits", skip=("response",))),
+            ("Excitation", dataclass_fields(RandomExcitation, "excitation")),
+            ("Limits", dataclass_fields(Limits, "limits")),
             ("Acquisition", dataclass_fields(RandomAcquisition, "acquisition")),
             ("Pre-test", dataclass_fields(PretestSettings, "pretest")),
         ]

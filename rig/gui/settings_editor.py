@@ -18,7 +18,6 @@ from PySide6 import QtCore, QtWidgets
 
 from rig.config.tomlconfig import ConfigError
 from rig.gui.forms import SettingsForm
-from rig.gui.settings_fields import split_error
 
 __all__ = ["SettingsEditor"]
 
@@ -160,8 +159,7 @@ class SettingsEditor(QtWidgets.QWidget):
         try:
             value = self.build(self.document())
         except ConfigError as exc:
-            path, problem = split_error(str(exc), self.source)
-            form.show_error(path, problem)
+            form.show_error(exc.path, exc.problem)
             self.summary.setText("")
             return None, str(exc)
         self.value = value

@@ -1,14 +1,15 @@
-"""The entries of a settings form, without Qt: fields generated from the settings dataclasses,
-values to and from text, and settings errors split into key path and problem.
+"""The entries of a settings form, without Qt: fields generated from the settings classes and
+values to and from text.
 
 A form edits a *settings document*: the nested plain data that a plan's or a setup's
 ``to_dict()`` gives and ``plan_from_dict`` / ``setup_from_dict`` read back. Its fields are
-generated from the dataclasses themselves (:func:`dataclass_fields`): one field per dataclass
-field, its kind taken from the field's default as the TOML reader does, its label from the name
-(the unit suffix becomes a unit in brackets: ``ramp_s`` -> ``ramp [s]``), its tooltip from the
-class docstring's Parameters section. Text that is not a number is passed on as typed, so the
-loader's own message says what is wrong with it (:func:`parse_value`), and that message is
-split into the key path it names and the problem (:func:`split_error`).
+generated from the classes themselves (:func:`dataclass_fields`): one field per setting, its
+label from the name (the unit suffix becomes a unit in brackets: ``ramp_s`` -> ``ramp [s]``).
+For the classes declared in :mod:`rig.config.settings` (plans, setups) the kind, the choices and
+the tooltip are the declaration's; for plain dataclasses the kind follows the default's type
+and the tooltip comes from the class docstring's Parameters section. Text that is not a number
+is passed on as typed, so the loader's own message says what is wrong with it
+(:func:`parse_value`); that error carries its key path (:class:`rig.config.tomlconfig.ConfigError`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from rig.config.settings import declared_fields
+
 __all__ = [
     "KINDS",
     "Field",
@@ -31,8 +34,6 @@ __all__ = [
     "parameter_docs",
     "parse_value",
     "put_key",
-    "split_error",
-    "strip_index",
 ]
 
 
@@ -124,13 +125,15 @@ def dataclass_fields(
     kinds: Mapping[str, str] | None = None,
     labels: Mapping[str, str] | None = None,
 ) -> list[Field]:
-    """The fields of a settings dataclass, as the TOML reader reads them.
+    """The fields of a settings class, as its reader reads them.
 
-    The kind follows the default's type (bool: flag, int: integer, float or None: number,
-    tuple: numbers, str: text), like :func:`rig.config.plan_files._dataclass_fields`; ``choices``
-    and
-    ``kinds`` override it.
+    A class declared in :mod:`rig.config.settings` gives its declarations (sub-tables and
+    arrays of tables left to the caller, flattened tables spread in). For a plain dataclass the
+    kind follows the default's type (bool: flag, int: integer, float or None: number, tuple:
+    numbers, str: text); ``choices`` and ``kinds`` override it.
     """
+    if hasattr(cls, "__pydantic_fields__"):
+        return _declared(cls, prefix, set(skip), dict(labels or {}))
     choices, kinds, labels = dict(choices or {}), dict(kinds or {}), dict(labels or {})
     docs = parameter_docs(cls)
     skipped = set(skip)
@@ -166,6 +169,21 @@ def dataclass_fields(
                 docs.get(f.name, ""),
             )
         )
+    return out
+
+
+def _declared(cls: type, prefix: str, skip: set[str], labels: Mapping[str, str]) -> list[Field]:
+    flattened = getattr(cls, "__flattened__", {})
+    elsewhere = set(getattr(cls, "__set_elsewhere__", {}))
+    out = []
+    for d in declared_fields(cls):
+        if d.name in skip:
+            continue
+        if d.name in flattened:
+            out += _declared(flattened[d.name], prefix, skip | elsewhere, labels)
+        elif d.kind not in ("table", "rows"):
+            key = f"{prefix}.{d.name}" if prefix else d.name
+            out.append(Field(key, labels.get(d.name, label_of(d.name)), d.kind, d.choices, d.doc))
     return out
 
 
@@ -223,33 +241,6 @@ def parse_value(kind: str, text: str) -> Any:
     if kind == "numbers":
         return [float(v) if isinstance(v, int) else v for v in map(_number, tokens)]
     return [_number(t) for t in tokens]  # integers
-
-
-def split_error(message: str, source: str = "") -> tuple[str, str]:
-    """Key path and problem of a settings error.
-
-    ``"plan form: excitation: ExcitationSettings.levels_n[1]: must be > 0 N"`` gives
-    ``("excitation.levels_n[1]", "must be > 0 N")``: the table's path from the loader, the
-    field from the dataclass's own message.
-    """
-    text = message
-    if source and text.startswith(source + ": "):
-        text = text[len(source) + 2 :]
-    path, sep, problem = text.partition(": ")
-    if not sep or " " in path.replace("(root)", ""):
-        return "", message
-    path = "" if path == "(root)" else path
-    own = re.match(r"[A-Z]\w*(?: '[^']*')?\.(\w+(?:\[\d+\])?)(?::\s*)?", problem)
-    if own:
-        path = f"{path}.{own.group(1)}" if path else own.group(1)
-        problem = problem[own.end() :] or problem
-    return path, problem
-
-
-def strip_index(path: str) -> tuple[str, int | None]:
-    """``"frequencies.ranges[1].stop_hz"`` -> (``"frequencies.ranges.stop_hz"``, 1)."""
-    rows = [int(m) for m in re.findall(r"\[(\d+)\]", path)]
-    return re.sub(r"\[\d+\]", "", path), (rows[0] if rows else None)
 
 
 def get_key(doc: Mapping[str, Any], key: str) -> Any:

@@ -29,11 +29,7 @@ __all__ = ["SetupEditor"]
 
 def setup_form() -> SettingsForm:
     """The form of a lab setup."""
-    general = dataclass_fields(
-        LabSetup,
-        skip=("daq", "drive", "amplifier", "channels"),
-        kinds={"name": "text", "description": "text"},
-    )
+    general = dataclass_fields(LabSetup)
     form = SettingsForm(
         [
             ("Setup", general),
@@ -43,19 +39,8 @@ def setup_form() -> SettingsForm:
             ("Channels", []),
         ]
     )
-    columns = dataclass_fields(
-        ChannelSetup,
-        kinds={
-            "name": "text",
-            "physical": "text",
-            "quantity": "text",
-            "point": "integer",
-            "direction": "text",
-            "sensitivity": "number",
-            "sensitivity_unit": "text",
-        },
-    )
-    form.add_rows("Channels", "channels", "channels, in acquisition order", RowsTable(columns))
+    columns = RowsTable(dataclass_fields(ChannelSetup))
+    form.add_rows("Channels", "channels", "channels, in acquisition order", columns)
     return form
 
 

@@ -38,6 +38,7 @@ from rig.service.auth import bearer_token, ensure_token, token_matches
 from rig.service.codec import event_line, to_jsonable
 from rig.service.directory import DEFAULT_HOST, DEFAULT_PORT, ServiceDir
 from rig.service.hub import EventHub
+from rig.service.requests import AbortRequest, RequestError, SubmitRequest, read_request
 from rig.service.state import ACTIVE_STATES, FINAL_STATES, RunRecord, RunState, ServiceState
 from rig.service.worker import STOP_REASON, RigOptions, RigOwner
 
@@ -55,8 +56,6 @@ HEARTBEAT_S = 2.0
 _BATCH = 256  # event lines per write to a stream
 # matched with fullmatch: "$" would also match before a final newline ("ok\n")
 _OUT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,119}")
-
-_SUBMIT_KEYS = {"plan", "out", "label", "pause_on_fault"}
 
 
 @dataclass(frozen=True)
@@ -92,11 +91,14 @@ class ServiceOptions:
 
 
 class ApiError(Exception):
-    """An answer other than success: HTTP status, short code, message."""
+    """An answer other than success: HTTP status, short code, message and, for a request or
+    plan that does not validate, the key path of the problem."""
 
-    def __init__(self, status: int, code: str, message: str) -> None:
+    def __init__(
+        self, status: int, code: str, message: str, path: tuple[str | int, ...] | None = None
+    ) -> None:
         super().__init__(message)
-        self.status, self.code, self.message = status, code, message
+        self.status, self.code, self.message, self.path = status, code, message, path
 
 
 def _json(data: Any, status: int = 200) -> web.Response:
@@ -108,9 +110,18 @@ def _json(data: Any, status: int = 200) -> web.Response:
     )
 
 
-def _error(status: int, code: str, message: str, **headers: str) -> web.Response:
-    resp = _json({"error": {"status": status, "code": code, "message": message}}, status)
-    resp.headers.update(headers)
+def _error(
+    status: int,
+    code: str,
+    message: str,
+    path: tuple[str | int, ...] | None = None,
+    headers: Mapping[str, str] | None = None,
+) -> web.Response:
+    error: dict[str, Any] = {"status": status, "code": code, "message": message}
+    if path is not None:
+        error["path"] = list(path)
+    resp = _json({"error": error}, status)
+    resp.headers.update(headers or {})
     return resp
 
 
@@ -209,7 +220,7 @@ async def _guard(request: web.Request, handler) -> web.StreamResponse:
             "no-token",
             "this request carries no token: send 'Authorization: Bearer <token>' (the token "
             "is in the service directory's 'token' file)",
-            **{"WWW-Authenticate": 'Bearer realm="rig-service"'},
+            headers={"WWW-Authenticate": 'Bearer realm="rig-service"'},
         )
     if not token_matches(given, service.token):
         logger.warning(
@@ -219,7 +230,7 @@ async def _guard(request: web.Request, handler) -> web.StreamResponse:
     try:
         return await handler(request)
     except ApiError as exc:
-        return _error(exc.status, exc.code, exc.message)
+        return _error(exc.status, exc.code, exc.message, exc.path)
     except web.HTTPException as exc:
         return _error(exc.status, "http", exc.reason)
     except Exception as exc:
@@ -267,8 +278,15 @@ async def get_run(request: web.Request) -> web.Response:
         return _json({"run": service.record(request.match_info["run_id"]).public()})
 
 
+def _read(cls: type[Any], body: dict[str, Any]) -> Any:
+    try:
+        return read_request(cls, body)
+    except RequestError as exc:
+        raise ApiError(400, exc.code, str(exc), exc.error.path) from None
+
+
 def _plan(spec: Any) -> Any:
-    from rig.config.plans import PlanTooLarge, builtin_plans, load_plan, plan_from_dict
+    from rig.config.plans import ConfigError, PlanTooLarge, builtin_plans, load_plan, plan_from_dict
 
     try:
         if isinstance(spec, str):
@@ -289,7 +307,8 @@ def _plan(spec: Any) -> Any:
         while cause is not None and not isinstance(cause, PlanTooLarge):
             cause = cause.__cause__
         code = "bad-plan" if cause is None else "plan-too-large"
-        raise ApiError(400, code, str(exc)) from None
+        path = ("plan", *exc.path) if isinstance(exc, ConfigError) else None
+        raise ApiError(400, code, str(exc), path) from None
     raise ApiError(400, "bad-plan", "'plan' must be a built-in plan's name or a plan table")
 
 
@@ -316,17 +335,8 @@ async def submit_run(request: web.Request) -> web.Response:
     service = request.app[SERVICE]
     if service.stopping:
         raise ApiError(503, "stopping", "the service is stopping")
-    body = await _body(request)
-    unknown = set(body) - _SUBMIT_KEYS
-    if unknown:
-        raise ApiError(400, "bad-field", f"unknown field(s) {sorted(unknown)}")
-    if "plan" not in body:
-        raise ApiError(400, "bad-plan", "'plan' is missing")
-    label = body.get("label", "")
-    pause_on_fault = body.get("pause_on_fault", False)
-    if not isinstance(label, str) or not isinstance(pause_on_fault, bool):
-        raise ApiError(400, "bad-field", "'label' must be a string, 'pause_on_fault' a boolean")
-    plan = _plan(body["plan"])
+    submit = _read(SubmitRequest, await _body(request))
+    plan = _plan(submit.plan)
     try:
         service.setup.channels_for_points(plan.points)
     except ValueError as exc:
@@ -334,8 +344,8 @@ async def submit_run(request: web.Request) -> web.Response:
             400, "bad-plan", f"plan {plan.name!r} does not fit the bench: {exc}"
         ) from None
     with service.state.lock:
-        path = _out_path(service, body.get("out"), service.state.new_id(), plan.name)
-        record = service.state.add(plan, path, label[:200], pause_on_fault)
+        path = _out_path(service, submit.out, service.state.new_id(), plan.name)
+        record = service.state.add(plan, path, submit.label[:200], submit.pause_on_fault)
         logger.info("run %s (%s) queued, %s", record.id, plan.name, path)
     service.publish_state(record)
     return _json({"run": record.public()}, 201)
@@ -372,10 +382,7 @@ async def resume_run(request: web.Request) -> web.Response:
 
 async def abort_run(request: web.Request) -> web.Response:
     service = request.app[SERVICE]
-    body = await _body(request)
-    reason = body.get("reason") or "aborted by the operator"
-    if not isinstance(reason, str):
-        raise ApiError(400, "bad-field", "'reason' must be a string")
+    reason = _read(AbortRequest, await _body(request)).reason or "aborted by the operator"
     record = service.record(request.match_info["run_id"], queued_ok=False)
     if service.owner.abort(reason[:300], record.id):
         return _json({"run": record.public()})

@@ -22,14 +22,16 @@ from __future__ import annotations
 
 import logging
 import math
+from typing import Literal, get_args
 
 import numpy as np
 
-__all__ = ["RANDOM_KINDS", "band_limited_random"]
+__all__ = ["RANDOM_KINDS", "RandomKind", "band_limited_random"]
 
 logger = logging.getLogger(__name__)
 
-RANDOM_KINDS = ("periodic", "gaussian")
+RandomKind = Literal["periodic", "gaussian"]
+RANDOM_KINDS: tuple[str, ...] = get_args(RandomKind)
 
 
 def _band_mask(n_samples: int, sample_rate_hz: float, f_lo_hz: float, f_hi_hz: float):

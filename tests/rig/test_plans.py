@@ -112,6 +112,54 @@ def test_plan_errors_name_the_key(change, key):
     assert f"plan my.toml: {key}" in str(err.value)
 
 
+@pytest.mark.parametrize(
+    "change, path, problem",
+    [
+        # scalars are as strict as TOML: true is not an integer, "2" not a number
+        (
+            lambda d: d["acquisition"].update(average_blocks=True),
+            ("acquisition", "average_blocks"),
+            "expected an integer, got True",
+        ),
+        (lambda d: d["pretest"].update(noise_s="2"), ("pretest", "noise_s"), "expected a number"),
+        (lambda d: d["pretest"].update(noise_s=float("inf")), ("pretest", "noise_s"), "finite"),
+        # every misspelt key of the table, and what it knows
+        (
+            lambda d: d["control"].update(max_iteration=3, warmstart=True),
+            ("control",),
+            "unknown key(s) 'max_iteration', 'warmstart' (known here: coupling_uncertainty,",
+        ),
+    ],
+)
+def test_plan_values_are_read_strictly(change, path, problem):
+    data = _paper_dict()
+    change(data)
+    with pytest.raises(ConfigError) as err:
+        plan_from_dict(data, "plan my.toml")
+    assert err.value.path == path and problem in err.value.problem
+
+
+def test_a_setting_given_in_python_names_its_class_and_key_path():
+    from rig.config.plans import ExcitationSettings
+
+    with pytest.raises(ConfigError) as err:
+        ExcitationSettings(levels_n=(2.0, -1.0))
+    assert err.value.path == ("levels_n", 1)
+    assert str(err.value) == "ExcitationSettings.levels_n[1]: must be > 0, got -1.0"
+    # the default amplitudes follow the orders, in Python as in a file
+    assert ExcitationSettings(orders=(1, 3)).relative_amplitudes == (1.0, 0.02)
+
+
+@pytest.mark.parametrize("name", ["paper", "quick", "linear"])
+def test_to_dict_reads_back_and_names_each_limit_by_channel_or_point(name):
+    plan = load_plan(name)
+    data = json.loads(json.dumps(plan.to_dict()))
+    assert plan_from_dict(data, name) == plan
+    assert data["kind"] == plan.kind and data["excitation"] == plan.to_dict()["excitation"]
+    for row in data["limits"]["response"]:
+        assert ("channel" in row) != ("point" in row)
+
+
 def test_own_plan_file(tmp_path):
     text = (
         (builtin_plans()["quick"]).read_text().replace("levels_n = [2.0, 8.0]", "levels_n = [3.0]")

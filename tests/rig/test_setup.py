@@ -89,15 +89,21 @@ def test_setup_level_rules(reference):
     drive = reference.drive_force_channel
     with pytest.raises(ValueError, match="drive at point 5"):
         LabSetup(
-            "x",
-            "",
-            reference.daq,
-            dataclasses.replace(reference.drive, point=5),
-            reference.amplifier,
-            reference.channels,
+            name="x",
+            drive=dataclasses.replace(reference.drive, point=5),
+            channels=reference.channels,
         )
-    with pytest.raises(ValueError, match="ChannelSetup 'f'.direction"):
-        ChannelSetup("f", "Dev1/ai0", "force", 3, "q", 1.0, "mV/N")
+    with pytest.raises(ConfigError, match="ChannelSetup.direction: expected x, y or z") as err:
+        ChannelSetup(
+            name="f",
+            physical="Dev1/ai0",
+            quantity="force",
+            point=3,
+            direction="q",
+            sensitivity=1.0,
+            sensitivity_unit="mV/N",
+        )
+    assert err.value.path == ("direction",)
     assert drive.role == "drive-force"
 
 

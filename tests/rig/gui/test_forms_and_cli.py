@@ -11,7 +11,7 @@ from rig.config.plan_settings import AcquisitionSettings, PretestSettings
 from rig.config.plans import load_plan, plan_from_dict
 from rig.config.setup import load_setup, setup_from_dict
 from rig.gui.live_data import LiveRun
-from rig.gui.settings_fields import dataclass_fields, label_of, parse_value, split_error
+from rig.gui.settings_fields import dataclass_fields, label_of, parse_value
 
 
 def test_fields_are_generated_from_the_dataclasses():
@@ -37,37 +37,47 @@ def test_text_that_is_not_a_number_reaches_the_loader_as_typed():
 
 
 @pytest.mark.parametrize(
-    "message, path, problem",
+    "change, path, problem",
     [
         (
-            "plan form: excitation.levels_n[1]: must be > 0, got -2.0",
-            "excitation.levels_n[1]",
+            lambda d: d["excitation"].update(levels_n=[2.0, -2.0]),
+            ("excitation", "levels_n", 1),
             "must be > 0, got -2.0",
         ),
         (
-            "plan form: excitation: ExcitationSettings.levels_n[0]: must be > 0 N, got -1.0",
-            "excitation.levels_n[0]",
-            "must be > 0 N, got -1.0",
+            lambda d: d["frequencies"]["ranges"][0].update(stop_hz=20.0),
+            ("frequencies", "ranges", 0, "stop_hz"),
+            "is below start_hz (21.0), got 20.0",
         ),
         (
-            "setup form: channels[2]: ChannelSetup 'acc1'.sensitivity: must be finite and > 0",
-            "channels[2].sensitivity",
-            "must be finite and > 0",
+            lambda d: d["control"].update(max_iterations=0),
+            ("control", "max_iterations"),
+            "must be >= 1, got 0",
         ),
         (
-            "plan form: frequencies.ranges[0]: FrequencyRange: stop_hz 20 is below start_hz 21",
-            "frequencies.ranges[0]",
-            "FrequencyRange: stop_hz 20 is below start_hz 21",
+            lambda d: d["control"].update(orders=[1]),
+            ("control", "orders"),
+            "set by excitation.orders, not here",
         ),
+        (lambda d: d["excitation"].update(orders=[1, "x"]), ("excitation", "orders", 1), None),
         (
-            "setup 'x' has no accelerometer at point(s) [14]; points with one: [1]",
-            "",
-            "setup 'x' has no accelerometer at point(s) [14]; points with one: [1]",
+            lambda d: d["pretest"].update(noise_s="abc"),
+            ("pretest", "noise_s"),
+            "expected a number, got 'abc'",
         ),
     ],
 )
-def test_a_settings_error_names_its_field(message, path, problem):
-    assert split_error(message, message.split(":")[0]) == (path, problem)
+def test_a_settings_error_carries_its_key_path(change, path, problem):
+    from rig.config.tomlconfig import ConfigError
+
+    data = load_plan("paper").to_dict()
+    change(data)
+    with pytest.raises(ConfigError) as err:
+        plan_from_dict(data, "plan form")
+    assert err.value.path == path
+    assert str(err.value).startswith(f"plan form: {err.value.key}: ")
+    if problem is not None:
+        assert err.value.problem == problem
 
 
 @pytest.mark.parametrize("name", ["paper", "quick", "linear"])

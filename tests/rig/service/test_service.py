@@ -134,6 +134,14 @@ def test_bad_requests_are_refused_with_reasons(shared_service):
         status, _, data = _raw(svc, "POST", "/api/v1/runs", auth, body)
         assert status == 400, data
         assert json.loads(data)["error"]["code"] == code
+    # a plan or a field that does not validate: the answer carries the key path
+    plan = {"name": "x", "points": [3], "excitation": {"levels_n": [1.0, -2.0]}}
+    for body, path in (
+        ({"plan": {**plan, "frequencies": {"ranges": []}}}, ["plan", "excitation", "levels_n", 1]),
+        ({"plan": "quick", "pause_on_fault": "yes"}, ["pause_on_fault"]),
+    ):
+        status, _, data = _raw(svc, "POST", "/api/v1/runs", auth, json.dumps(body).encode())
+        assert status == 400 and json.loads(data)["error"]["path"] == path, data
     with pytest.raises(ServiceError) as info:
         client.submit(
             {
