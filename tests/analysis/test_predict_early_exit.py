@@ -52,13 +52,15 @@ def _calibrate(model, data, monkeypatch, early_exit: bool):
     make = nonlinear.make_predictor
     with monkeypatch.context() as m:
         m.setattr(nonlinear, "make_predictor", keep)
-        if not early_exit:
-            bounded = FRFObjective.bounded_cost
-            m.setattr(
-                FRFObjective,
-                "bounded_cost",
-                lambda self, t, limit: bounded(self, t, None, stop_at_failure=False),
-            )
+        if not early_exit:  # every start scored in full, without stopping
+            cost = FRFObjective.cost
+            m.setattr(FRFObjective, "cost", lambda self, t: cost(self, t, stop_at_failure=False))
+
+            def score_all(spec, thetas, keep, executor, local, on_done, first=None):
+                costs = nonlinear.evaluate_costs(spec, thetas, executor, local, on_done)
+                return costs, np.ones(len(costs), bool)
+
+            m.setattr(nonlinear, "screen_costs", score_all)
         at_lhs = {}
         res = calibrate_nonlinear(
             model,
