@@ -219,8 +219,9 @@ class SteppedSinePredictor:
         self._linear: Any = None
         #: Steps solved by stepping so far (every step of every pass, over all calls).
         self.steps_solved = 0
-        #: Times each sweep (index among the needed ones) ended with a needed step unsolved:
-        #: the order ``stop_at_failure`` tries them in.
+        #: Times each sweep (index among the needed ones) ended with a needed step unsolved
+        #: (or, in a prediction with a bound, with the metric past it): the order a prediction
+        #: that may stop early tries them in.
         self._failed_sweeps: dict[int, int] = {}
 
     def _dof(self, asm, point: int, direction: str, what: str) -> int:
@@ -293,8 +294,8 @@ class SteppedSinePredictor:
         return alt if miss(alt) < m0 else p
 
     def _sweep_order(self, sweeps: list[np.ndarray]) -> list[int]:
-        """Indices into ``sweeps`` (row arrays), likeliest to fail first: by how often each
-        failed in earlier calls, then by level (the contact's nonlinearity grows with it),
+        """Indices into ``sweeps`` (row arrays), likeliest to end a prediction first: by how
+        often each did in earlier calls, then by level (the contact's nonlinearity grows with it),
         highest first."""
         lv = self.data.levels_n[self.data.level_index]
         return sorted(

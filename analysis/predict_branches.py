@@ -258,8 +258,8 @@ class BranchMatchedPredictor(SteppedSinePredictor):
             Stop once the metric over the needed steps provably exceeds ``bound.limit``: each
             step's term is added to ``bound.floor`` once no later stage can change its
             solution (:meth:`_solve_sweep`), and the solve ends when the floor passes the
-            limit (``bound.exceeded``), with the sweeps not yet solved left out. Every step
-            solved is the same as without it.
+            limit (``bound.exceeded``), with the sweeps not yet solved left out (they are tried
+            in the order of ``stop_at_failure``). Every step solved is the same as without it.
 
         Returns
         -------
@@ -277,17 +277,16 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         d = self.data
         need = needed_rows(d.n_steps, rows)
         sweeps = [s[need[s]] for s in sweeps_of(d) if need[s].any()]  # needed steps, in order
-        order = self._sweep_order(sweeps) if stop_at_failure else range(len(sweeps))
+        early = stop_at_failure or bound is not None
+        order = self._sweep_order(sweeps) if early else range(len(sweeps))
         solved: dict[int, dict] = {}
         stopped = False
         for i in order:
             solved[i], failed = self._solve_sweep(pb, sweeps[i], stop_at_failure, bound)
-            if failed:
+            past = bound is not None and bound.exceeded
+            if failed or past:  # the sweeps that end predictions early are tried first
                 self._failed_sweeps[i] = self._failed_sweeps.get(i, 0) + 1
-                if stop_at_failure:
-                    stopped = True
-                    break
-            if bound is not None and bound.exceeded:
+            if past or (failed and stop_at_failure):
                 stopped = True
                 break
         out = {}
