@@ -12,7 +12,7 @@ Sensor masses from the file's channel table are part of the model.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,7 +31,9 @@ from analysis.system import (
 )
 
 __all__ = [
+    "BOUNDED_MESSAGE",
     "STOPPED_MESSAGE",
+    "CostBound",
     "Prediction",
     "SteppedSinePredictor",
     "ZeroStandardError",
@@ -48,6 +50,35 @@ STOPPED_MESSAGE = (
     "stopped at a needed step without a solution (stop_at_failure): {n} needed step(s) left "
     "unsolved"
 )
+#: The message of a prediction stopped once its metric exceeded a bound's limit.
+BOUNDED_MESSAGE = "stopped once the metric exceeded {limit:.6g} (its lower bound {floor:.6g})"
+
+
+@dataclass
+class CostBound:
+    """A metric's running lower bound, for a prediction that may stop once the metric provably
+    exceeds ``limit``.
+
+    The metric is a sum of non-negative terms, one per step: ``step_cost(row, frf)`` of the
+    step's final FRFs (channels, compared orders). A predictor adds each step's term to
+    :attr:`floor` once no later stage can change that step's solution, so ``floor`` never
+    exceeds the metric of the full prediction; once it exceeds ``limit`` the rest cannot bring
+    the metric back under it, and the prediction stops there.
+    """
+
+    step_cost: Callable[[int, np.ndarray], float]
+    limit: float
+    floor: float = 0.0
+
+    def add(self, row: int, frf: np.ndarray) -> bool:
+        """Add step ``row``'s final term; whether the metric now exceeds the limit."""
+        self.floor += self.step_cost(row, frf)
+        return self.exceeded
+
+    @property
+    def exceeded(self) -> bool:
+        # a relative margin far above the rounding of the two sums' different orders
+        return self.floor > self.limit * (1.0 + 1e-9)
 
 
 @dataclass(frozen=True)
@@ -63,12 +94,16 @@ class Prediction:
     converged : ndarray of bool, shape (n_steps,)
     messages : list of str
         Why unconverged steps failed.
+    floor : float or None
+        Set when the prediction stopped because its metric exceeded a :class:`CostBound`'s
+        limit: the metric's lower bound reached (above that limit).
     """
 
     frf: np.ndarray
     d_frf: dict[str, np.ndarray]
     converged: np.ndarray
     messages: list[str]
+    floor: float | None = None
 
     @classmethod
     def empty(cls, shape: tuple[int, int, int], params: Sequence[str]) -> Prediction:
@@ -184,8 +219,9 @@ class SteppedSinePredictor:
         self._linear: Any = None
         #: Steps solved by stepping so far (every step of every pass, over all calls).
         self.steps_solved = 0
-        #: Times each sweep (index among the needed ones) ended with a needed step unsolved:
-        #: the order ``stop_at_failure`` tries them in.
+        #: Times each sweep (index among the needed ones) ended with a needed step unsolved
+        #: (or, in a prediction with a bound, with the metric past it): the order a prediction
+        #: that may stop early tries them in.
         self._failed_sweeps: dict[int, int] = {}
 
     def _dof(self, asm, point: int, direction: str, what: str) -> int:
@@ -258,8 +294,8 @@ class SteppedSinePredictor:
         return alt if miss(alt) < m0 else p
 
     def _sweep_order(self, sweeps: list[np.ndarray]) -> list[int]:
-        """Indices into ``sweeps`` (row arrays), likeliest to fail first: by how often each
-        failed in earlier calls, then by level (the contact's nonlinearity grows with it),
+        """Indices into ``sweeps`` (row arrays), likeliest to end a prediction first: by how
+        often each did in earlier calls, then by level (the contact's nonlinearity grows with it),
         highest first."""
         lv = self.data.levels_n[self.data.level_index]
         return sorted(

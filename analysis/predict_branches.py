@@ -23,7 +23,8 @@ fits better.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping, Sequence
+import dataclasses
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -33,7 +34,9 @@ from analysis.mhb.sensitivity import point_sensitivities
 from analysis.mhb.solver import solve_point
 from analysis.mhb.sweep import solve_steps
 from analysis.predict import (
+    BOUNDED_MESSAGE,
     STOPPED_MESSAGE,
+    CostBound,
     Prediction,
     SteppedSinePredictor,
     needed_rows,
@@ -111,6 +114,36 @@ def _jumps(fundamental: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         change = np.abs(np.diff(fundamental, axis=0)) / np.abs(fundamental[:-1])
     return np.flatnonzero(np.nan_to_num(change, nan=0.0).max(axis=1) > JUMP_RELATIVE)
+
+
+class _Tally:
+    """A sweep's final step terms added to a :class:`~analysis.predict.CostBound` (nothing
+    without one): the steps of ``segment`` count once the backward pass has passed them, those
+    in ``pending`` (that may still take a fold partner) at the end."""
+
+    def __init__(self, predictor, bound, sweep, chosen, segment, pending) -> None:
+        self.predictor, self.bound, self.sweep, self.chosen = predictor, bound, sweep, chosen
+        self.pending = set(pending)
+
+    def add(self, positions: Iterable[int]) -> bool:
+        """Add the terms of the steps at ``positions`` (of the sweep) that are final: whether
+        the bound is now exceeded."""
+        if self.bound is None:
+            return False
+        for j in positions:
+            j = int(j)
+            if j in self.pending:
+                continue
+            p = self.chosen[j]
+            if p.converged:
+                row = int(self.sweep[j])
+                self.bound.add(row, self.predictor.frf_of(row, p)[0])
+        return self.bound.exceeded
+
+    def close(self) -> None:
+        """Add the pending steps' terms (after the fold partners)."""
+        pending, self.pending = sorted(self.pending), set()
+        self.add(pending)
 
 
 class BranchMatchedPredictor(SteppedSinePredictor):
@@ -198,6 +231,7 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         rows: np.ndarray | None = None,
         *,
         stop_at_failure: bool = False,
+        bound: CostBound | None = None,
     ):
         """Solutions of every needed step on the measured branch.
 
@@ -220,6 +254,12 @@ class BranchMatchedPredictor(SteppedSinePredictor):
             sweeps are independent (each starts from its first step's linear response), so
             they are solved here in the order likeliest to fail first
             (:meth:`~analysis.predict.SteppedSinePredictor._sweep_order`).
+        bound : CostBound, optional
+            Stop once the metric over the needed steps provably exceeds ``bound.limit``: each
+            step's term is added to ``bound.floor`` once no later stage can change its
+            solution (:meth:`_solve_sweep`), and the solve ends when the floor passes the
+            limit (``bound.exceeded``), with the sweeps not yet solved left out (they are tried
+            in the order of ``stop_at_failure``). Every step solved is the same as without it.
 
         Returns
         -------
@@ -237,16 +277,18 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         d = self.data
         need = needed_rows(d.n_steps, rows)
         sweeps = [s[need[s]] for s in sweeps_of(d) if need[s].any()]  # needed steps, in order
-        order = self._sweep_order(sweeps) if stop_at_failure else range(len(sweeps))
+        early = stop_at_failure or bound is not None
+        order = self._sweep_order(sweeps) if early else range(len(sweeps))
         solved: dict[int, dict] = {}
         stopped = False
         for i in order:
-            solved[i], failed = self._solve_sweep(pb, sweeps[i], stop_at_failure)
-            if failed:
+            solved[i], failed = self._solve_sweep(pb, sweeps[i], stop_at_failure, bound)
+            past = bound is not None and bound.exceeded
+            if failed or past:  # the sweeps that end predictions early are tried first
                 self._failed_sweeps[i] = self._failed_sweeps.get(i, 0) + 1
-                if stop_at_failure:
-                    stopped = True
-                    break
+            if past or (failed and stop_at_failure):
+                stopped = True
+                break
         out = {}
         for i in sorted(solved):
             out.update(solved[i])
@@ -254,11 +296,20 @@ class BranchMatchedPredictor(SteppedSinePredictor):
             self._last = (model, key, (pb, out))
         return pb, out
 
-    def _solve_sweep(self, pb, sweep: np.ndarray, stop_at_failure: bool) -> tuple[dict, bool]:
+    def _solve_sweep(
+        self, pb, sweep: np.ndarray, stop_at_failure: bool, bound: CostBound | None = None
+    ) -> tuple[dict, bool]:
         """Solutions (row -> MHBPoint) of the steps ``sweep`` (file rows, in the test's order)
         on the measured branch, and whether one of them has none. With ``stop_at_failure``,
         once a step is known to have none (no later stage can give it one), the others are
-        left unfinished and only that step is returned."""
+        left unfinished and only that step is returned.
+
+        With ``bound``, a step's term is final once no later stage can replace its solution:
+        the forward solution of a step outside the backward pass's segment, the chosen one of a
+        step the backward pass has passed, and neither for the steps that may take a fold
+        partner (those of :meth:`_before_jumps` with the forward misfits, a superset of the
+        ones with the final misfits, which only decrease) until the end. Once ``bound`` is
+        exceeded the sweep ends and nothing is returned."""
         self.steps_solved += sweep.size
         F = self._force_sign * self.drive_force[sweep][:, :, None]
         w = 2 * np.pi * self.data.frequency_hz[sweep]
@@ -281,11 +332,16 @@ class BranchMatchedPredictor(SteppedSinePredictor):
             ]
         )
         bad = np.flatnonzero((fits > SUSPECT_SIGMA) & (rel > SUSPECT_RELATIVE))
+        seg = np.arange(0)
         if self.match_branches and bad.size:
             lo, hi = bad.min(), min(bad.max() + 1, sweep.size - 1)
             seg = np.arange(hi, lo - 1, -1)
+        tally = _Tally(self, bound, sweep, chosen, seg, self._before_jumps(sweep, frfs, fits))
+        if tally.add(np.setdiff1d(np.arange(sweep.size), seg)):
+            return {}, False
+        if seg.size:
             X0 = points[hi].X if points[hi].converged and hi > bad.max() else None
-            if stop_at_failure:
+            if stop_at_failure or bound is not None:
                 back = _iter_steps(pb, w[seg], F[seg], X0=X0, max_substep_depth=MAX_SUBSTEP_DEPTH)
             else:
                 back = solve_steps(
@@ -298,14 +354,17 @@ class BranchMatchedPredictor(SteppedSinePredictor):
                 elif stop_at_failure and not chosen[j].converged:
                     # unsolved both ways; the fold partners replace solved steps only
                     return {int(sweep[j]): chosen[j]}, True
+                if tally.add([int(j)]):
+                    return {}, False
         failed = not all(p.converged for p in chosen)
         if stop_at_failure and failed:
-            j = next(j for j, p in enumerate(chosen) if not p.converged)
-            return {int(sweep[j]): chosen[j]}, True
+            k = next(k for k, p in enumerate(chosen) if not p.converged)
+            return {int(sweep[k]): chosen[k]}, True
         if self.match_branches:
             for j in self._before_jumps(sweep, frfs, fits):
                 for p in self._fold_partners(pb, points[j].X, w[j], w[j - 1], F[j]):
                     self._keep_better(sweep[j], p, j, chosen, fits)
+        tally.close()
         return dict(zip(sweep.tolist(), chosen, strict=True)), failed
 
     def _keep_better(self, row: int, p, j: int, chosen: list, fits: np.ndarray) -> None:
@@ -428,11 +487,12 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         rows: np.ndarray | None = None,
         *,
         stop_at_failure: bool = False,
+        bound: CostBound | None = None,
     ) -> Prediction:
         """Model FRFs (and derivatives) on the measured branch; see the base class (and
-        :meth:`solve` for ``stop_at_failure``)."""
+        :meth:`solve` for ``stop_at_failure`` and ``bound``)."""
         return self.predict_with_sigma(
-            values, params, rows, sigma=False, stop_at_failure=stop_at_failure
+            values, params, rows, sigma=False, stop_at_failure=stop_at_failure, bound=bound
         )[0]
 
     def predict_with_sigma(
@@ -443,11 +503,12 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         *,
         sigma: bool = True,
         stop_at_failure: bool = False,
+        bound: CostBound | None = None,
     ) -> tuple[Prediction, np.ndarray | None]:
         """:meth:`predict` and, with ``sigma``, the residuals' standard errors of
         :meth:`response_sigma` at the same solutions."""
         model = self.model.with_values(values) if values else self.model
-        pb, points = self.solve(model, rows=rows, stop_at_failure=stop_at_failure)
+        pb, points = self.solve(model, rows=rows, stop_at_failure=stop_at_failure, bound=bound)
         d = self.data
         C = len(self.channel_indices)
         out = Prediction.empty((d.n_steps, C, len(self.compared)), params)
@@ -462,8 +523,11 @@ class BranchMatchedPredictor(SteppedSinePredictor):
                     out.d_frf[name][row] = (
                         sens[name].d_outputs(pb.order_k[self.compared])[:, :C].T * factor
                     )
+        if bound is not None and bound.exceeded:
+            out.messages.append(BOUNDED_MESSAGE.format(limit=bound.limit, floor=bound.floor))
+            out = dataclasses.replace(out, floor=bound.floor)
         left = np.flatnonzero(need & ~np.isin(np.arange(d.n_steps), list(points)))
-        if left.size:  # stop_at_failure stopped at a step without a solution
+        if left.size and out.floor is None:  # stop_at_failure stopped at a step without one
             out.messages.append(STOPPED_MESSAGE.format(n=left.size))
         sig = self.response_sigma(pb, points) if sigma else None
         return out, sig

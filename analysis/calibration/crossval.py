@@ -20,6 +20,7 @@ B. Efron, C. Stein, "The jackknife estimate of variance", Ann. Statist. 9 (1981)
 from __future__ import annotations
 
 import concurrent.futures as cf
+import dataclasses
 import functools
 import logging
 import time
@@ -179,10 +180,39 @@ class CrossValidation:
         }
 
 
-def _fold(spec: ObjectiveSpec, theta0: np.ndarray, bounds, max_iterations: int):
+class _Started:
+    """A fold's objective whose residuals and Jacobian at the start are given: every fold starts
+    at the calibrated optimum, where the predictions of all folds are those of the full
+    calibration (a fold leaves out FRFs, not steps' solutions), so they are made once."""
+
+    def __init__(self, objective: FRFObjective, theta0: np.ndarray, r0, J0) -> None:
+        self.objective, self.theta0, self.r0, self.J0 = objective, theta0, r0, J0
+
+    def __call__(self, theta, want_jac: bool = True):
+        if self.r0 is not None and np.array_equal(theta, self.theta0):
+            return self.r0, (self.J0 if want_jac else None)
+        return self.objective(theta, want_jac)
+
+
+def _fold(spec: ObjectiveSpec, theta0: np.ndarray, bounds, max_iterations: int, start=None):
+    """One fold's Gauss-Newton from ``theta0``; ``start`` the full objective's ``(r, J, index)``
+    there (``index`` picks the fold's residuals from them), or None."""
     obj = spec.build()
-    res = least_squares_lm(obj, theta0, bounds=bounds, damped=False, max_iterations=max_iterations)
+    r0 = J0 = None
+    if start is not None:
+        r, J, index = start
+        r0, J0 = r[index], J[index]
+    fun = _Started(obj, theta0, r0, J0)
+    res = least_squares_lm(fun, theta0, bounds=bounds, damped=False, max_iterations=max_iterations)
     return res.x, len(res.history) - 1
+
+
+def residual_index(full_mask: np.ndarray, fold_mask: np.ndarray, n_orders: int) -> np.ndarray:
+    """Positions in :class:`FRFObjective` residuals over ``full_mask`` of those over
+    ``fold_mask`` (a subset): real parts of the selected FRFs' orders, then imaginary parts."""
+    keep = np.repeat(fold_mask[full_mask], n_orders)
+    idx = np.flatnonzero(keep)
+    return np.concatenate([idx, keep.size + idx])
 
 
 def cross_validate(
@@ -239,11 +269,22 @@ def cross_validate(
         )
     bounds = space.theta_bounds()
     x0 = calibration.lm.x
-    job = functools.partial(_fold, theta0=x0, bounds=bounds, max_iterations=max_iterations)
     tick = (lambda k: on_done(k, len(specs))) if on_done else None
     if tick:
         tick(0)  # the clock starts here: folds run side by side
-    out = run_jobs(job, specs, executor, tick)
+    full = dataclasses.replace(specs[0], mask=base).build()
+    r0, J0 = full(x0)
+    jobs = [
+        (
+            spec,
+            None
+            if J0 is None
+            else (r0, J0, residual_index(full.mask, spec.mask & full.mask, full.H.shape[2])),
+        )
+        for spec in specs
+    ]
+    job = functools.partial(_fold_job, theta0=x0, bounds=bounds, max_iterations=max_iterations)
+    out = run_jobs(job, jobs, executor, tick)
     stuck = [name for name, (_, accepted) in zip(folds, out, strict=True) if accepted == 0]
     if stuck:
         log.warning(
@@ -253,9 +294,7 @@ def cross_validate(
             len(out),
             ", ".join(stuck[:4]) + (" ..." if len(stuck) > 4 else ""),
         )
-    fold_chi2, fold_p, share = _fold_diagnostics(
-        FRFObjective(pred, space, base, st.weighting), x0, masks
-    )
+    fold_chi2, fold_p, share = _fold_diagnostics(full, r0, J0, masks)
     est = np.array([space.to_physical(x) for x, _ in out])
     K = len(est)
     mean = est.mean(axis=0)
@@ -277,11 +316,16 @@ def cross_validate(
     )
 
 
-def _fold_diagnostics(obj: FRFObjective, x: np.ndarray, masks):
-    """Per fold: chi-square per value at ``x``, its noise-only p-value and the fold's share of
-    each parameter's (diagonal) Fisher information. ``masks`` are ``(rows, channel)``."""
+def _fold_job(job, theta0, bounds, max_iterations: int):
+    spec, start = job
+    return _fold(spec, theta0, bounds, max_iterations, start)
+
+
+def _fold_diagnostics(obj: FRFObjective, r, J, masks):
+    """Per fold: chi-square per value of the residuals ``r`` (Jacobian ``J``) of ``obj`` at the
+    calibrated optimum, its noise-only p-value and the fold's share of each parameter's
+    (diagonal) Fisher information. ``masks`` are ``(rows, channel)``."""
     K = len(masks)
-    r, J = obj(x)
     if J is None or not np.all(np.isfinite(r)):
         log.warning(
             "cross-validation: the calibrated model did not converge on every step; "

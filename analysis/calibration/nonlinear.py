@@ -40,6 +40,7 @@ __all__ = [
     "fitted_rows",
     "level_rows",
     "make_predictor",
+    "screen_costs",
 ]
 
 log = logging.getLogger(__name__)
@@ -190,6 +191,10 @@ class NonlinearCalibration:
         ``2 cost / (m - n)``.
     starts : ndarray, shape (n_starts, n)
         Latin hypercube candidates; ``start_costs`` their metric.
+    start_exact : ndarray of bool, shape (n_starts,)
+        Where ``start_costs`` is the metric itself; elsewhere it is a lower bound above the
+        ``n_lm_starts``-th best cost (the start's prediction was stopped there:
+        :func:`screen_costs`).
     lm : LeastSquaresResult
         The refinement (scaled coordinates) with its history.
     held : HeldParameters or None
@@ -214,6 +219,7 @@ class NonlinearCalibration:
     calibration_levels_n: tuple[float, ...]
     validation_level_n: float | None
     timings: dict[str, float] = field(default_factory=dict)
+    start_exact: np.ndarray | None = None
     cov_noise: np.ndarray | None = None
     held: HeldParameters | None = None
     held_cov: np.ndarray | None = None
@@ -233,6 +239,8 @@ class NonlinearCalibration:
             self.held_cov = np.zeros((n, n))
         if self.noise_scale is None:
             self.noise_scale = np.ones(n)
+        if self.start_exact is None:
+            self.start_exact = np.ones(len(self.start_costs), bool)
 
     @property
     def std(self) -> dict[str, float]:
@@ -365,6 +373,7 @@ class NonlinearCalibration:
             ),
             "starts": self.starts.tolist(),
             "start_costs": [None if not np.isfinite(c) else float(c) for c in self.start_costs],
+            "start_cost_exact": np.asarray(self.start_exact, bool).tolist(),
             "lm": {
                 "success": self.lm.success,
                 "message": self.lm.message,
@@ -437,7 +446,8 @@ class ObjectiveSpec:
 _WORKER_CACHE: dict[int, FRFObjective] = {}
 
 
-def _evaluate_chunk(spec: ObjectiveSpec, thetas: np.ndarray) -> list[float]:
+def _objective_in_worker(spec: ObjectiveSpec) -> FRFObjective:
+    """The objective of ``spec``, built once per worker process."""
     key = hash(
         (
             spec.model_toml,
@@ -452,7 +462,148 @@ def _evaluate_chunk(spec: ObjectiveSpec, thetas: np.ndarray) -> list[float]:
     if obj is None:
         _WORKER_CACHE.clear()
         obj = _WORKER_CACHE[key] = spec.build()
+    return obj
+
+
+def _evaluate_chunk(spec: ObjectiveSpec, thetas: np.ndarray) -> list[float]:
+    obj = _objective_in_worker(spec)
     return [obj.cost(t) for t in thetas]
+
+
+def _screen_chunk(spec: ObjectiveSpec, thetas, offsets, keep: int | None, known: list[float]):
+    """:func:`_screen` of one chunk in a worker."""
+    return _screen(_objective_in_worker(spec), thetas, offsets, keep, known)
+
+
+def _screen(obj: FRFObjective, thetas, offsets, keep: int | None, known, on_each=None):
+    """Costs of ``thetas`` over ``obj``'s selection, in turn: ``(costs, exact)``.
+
+    ``offsets`` are the points' costs over the rest of the selection (already scored), and a
+    point's total is its offset plus its cost here. With ``keep``, each point is stopped once
+    its total provably exceeds the ``keep``-th smallest exact total known (``known``, then
+    those of this chunk), and the cost here is then a lower bound (``exact`` False).
+    """
+    known = list(known)
+    costs, exact = [], []
+    for t, off in zip(thetas, offsets, strict=True):
+        kth = sorted(known)[keep - 1] if keep is not None and len(known) >= keep else None
+        if not np.isfinite(off):  # no solution in the part already scored
+            c, ok = np.inf, True
+        elif kth is not None and off > kth * (1.0 + 1e-9):
+            c, ok = 0.0, False
+        else:
+            # an absolute margin on the rest's limit: the rounding of the total, not the rest's
+            c, ok = obj.bounded_cost(t, None if kth is None else kth - off + 1e-9 * kth)
+        costs.append(c)
+        exact.append(ok)
+        if ok and np.isfinite(c):
+            known.append(off + c)
+        if on_each:
+            on_each()
+    return costs, exact
+
+
+def _screen_all(spec, local, thetas, offsets, keep, executor, tick):
+    """:func:`_screen` of every point, in chunks on ``executor`` (in order, as many in flight as
+    workers, each later chunk starting with every exact total known by then)."""
+    if executor is None:
+        c, e = _screen(local or spec.build(), thetas, offsets, keep, [], tick)
+        return np.array(c, dtype=float), np.array(e, bool)
+    workers = max(1, getattr(executor, "_max_workers", 2) or 2)
+    parts = [
+        (t, o) for t, o in zip(_chunks(thetas, workers), _chunks(offsets, workers), strict=True)
+    ]
+    costs: list = [None] * len(parts)
+    exact: list = [None] * len(parts)
+    known: list[float] = []
+    running: dict = {}
+    nxt = 0
+    while nxt < len(parts) or running:
+        while nxt < len(parts) and len(running) < workers:
+            t, o = parts[nxt]
+            running[executor.submit(_screen_chunk, spec, t, o, keep, list(known))] = nxt
+            nxt += 1
+        finished, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
+        for f in finished:
+            i = running.pop(f)
+            costs[i], exact[i] = f.result()
+            o = parts[i][1]
+            known += [
+                off + c
+                for c, ok, off in zip(costs[i], exact[i], o, strict=True)
+                if ok and c < np.inf
+            ]
+            if tick:
+                for _ in costs[i]:
+                    tick()
+    return np.concatenate(costs).astype(float), np.concatenate(exact).astype(bool)
+
+
+def screen_costs(
+    spec: ObjectiveSpec,
+    thetas: np.ndarray,
+    keep: int,
+    executor: cf.Executor | None = None,
+    local: FRFObjective | None = None,
+    on_done: Callable[[int, int], None] | None = None,
+    first: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The metric at many scaled points where it can matter to the ``keep`` best.
+
+    The metric is a sum of non-negative terms, one per step. With ``first`` (steps, a part of
+    the selection's), every point is scored on those steps first; that part of its metric is a
+    lower bound of the whole. The points are then finished in increasing order of it, and each
+    is stopped once the sum of its steps' final terms exceeds the ``keep``-th smallest metric
+    already known: the point cannot be among the ``keep`` best, and its metric is returned as
+    that lower bound. The sweeps are independent (each starts from its first step's linear
+    response), so scoring a part first changes no step's solution: the ``keep`` smallest
+    metrics, and which points have them, are those of :func:`evaluate_costs` (to the rounding
+    of a sum taken in two parts).
+
+    Returns
+    -------
+    costs : ndarray, shape (n,)
+        Exact costs, or lower bounds where ``exact`` is False (``inf``: no solution).
+    exact : ndarray of bool, shape (n,)
+    """
+    n = len(thetas)
+    if keep < 1:
+        raise ValueError(f"screen_costs: keep must be >= 1, got {keep}")
+    done = [0]
+
+    def tick() -> None:  # a point scored in two parts counts half each time
+        done[0] += 1
+        if on_done:
+            on_done(done[0] // passes, n)
+
+    if on_done:
+        on_done(0, n)  # the clock starts here: chunks run side by side
+    sel = spec.mask.any(axis=1)
+    part = None if first is None else np.asarray(first, bool) & sel
+    passes = 2 if part is not None and part.any() and (sel & ~part).any() else 1
+    if passes == 1:
+        return _screen_all(spec, local, thetas, np.zeros(n), keep, executor, tick)
+    specs, objs = [], []
+    for rows in (part, sel & ~part):
+        m = spec.mask & rows[:, None]
+        specs.append(dataclasses.replace(spec, mask=m))
+        objs.append(
+            None if local is None else FRFObjective(local.predictor, local.space, m, spec.weighting)
+        )
+    lead, _ = _screen_all(specs[0], objs[0], thetas, np.zeros(n), None, executor, tick)
+    order = np.argsort(lead, kind="stable")
+    rest, exact = _screen_all(specs[1], objs[1], thetas[order], lead[order], keep, executor, tick)
+    costs = np.empty(n)
+    ok = np.empty(n, bool)
+    costs[order] = lead[order] + rest
+    ok[order] = exact
+    return costs, ok
+
+
+def _chunks(thetas: np.ndarray, workers: int) -> list[np.ndarray]:
+    """Chunks of the points for ``workers`` processes (four each: progress and balance)."""
+    n_chunks = max(1, min(len(thetas), 4 * workers))
+    return [c for c in np.array_split(thetas, n_chunks) if len(c)]
 
 
 def evaluate_costs(
@@ -475,8 +626,7 @@ def evaluate_costs(
             if on_done:
                 on_done(len(costs), total)
         return np.array(costs)
-    n_chunks = max(1, min(total, 4 * (getattr(executor, "_max_workers", 2) or 2)))
-    chunks = [c for c in np.array_split(thetas, n_chunks) if len(c)]
+    chunks = _chunks(thetas, getattr(executor, "_max_workers", 2) or 2)
     futures = {executor.submit(_evaluate_chunk, spec, c): len(c) for c in chunks}
     if on_done:
         done = 0
@@ -484,6 +634,15 @@ def evaluate_costs(
             done += futures[f]
             on_done(done, total)
     return np.concatenate([f.result() for f in futures])
+
+
+def _lowest_level(data: SteppedSineData, rows: np.ndarray) -> np.ndarray:
+    """The fitted steps at the lowest fitted level, shape (n_steps,) of bool: the cheapest part
+    to score every start on first (the contact's nonlinearity grows with the level)."""
+    lv = data.levels_n[data.level_index]
+    out = np.zeros(data.n_steps, bool)
+    out[rows] = True
+    return out & np.isclose(lv, lv[rows].min())
 
 
 def _best_lm(objective, starts, bounds, st: CalibrationSettings, progress):
@@ -559,7 +718,9 @@ def calibrate_nonlinear(
     lo_t, hi_t = space.theta_bounds()
     thetas = np.clip(space.to_theta(starts), lo_t, hi_t)
     tick = (lambda k, n: progress("lhs_progress", {"done": k, "total": n})) if progress else None
-    costs = evaluate_costs(spec, thetas, executor, objective, on_done=tick)
+    costs, exact = screen_costs(
+        spec, thetas, st.n_lm_starts, executor, objective, tick, first=_lowest_level(data, rows)
+    )
     lhs_s = time.perf_counter() - t0
     if not np.isfinite(costs).any():
         raise RuntimeError("no Latin hypercube start gave a converged model response")
@@ -585,6 +746,7 @@ def calibrate_nonlinear(
         n_residuals=m,
         starts=starts,
         start_costs=costs,
+        start_exact=exact,
         lm=best,
         space=space,
         settings=st,

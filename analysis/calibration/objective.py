@@ -18,7 +18,7 @@ import numpy as np
 
 from analysis.calibration.parameters import ParameterSpace
 from analysis.measurement_file import require_steps
-from analysis.predict import SteppedSinePredictor, check_standard_errors
+from analysis.predict import CostBound, SteppedSinePredictor, check_standard_errors
 
 __all__ = ["FRFObjective"]
 
@@ -94,6 +94,9 @@ class FRFObjective:
         #: :meth:`cost` stops a prediction at its first selected step without a solution
         #: (where the predictor can: ``predict(..., stop_at_failure=True)``).
         self.stop_at_failure = accepts
+        #: :meth:`cost` can stop a prediction once its metric exceeds a limit (where the
+        #: predictor takes a :class:`~analysis.predict.CostBound`).
+        self.can_bound = accepts and "bound" in inspect.signature(predictor.predict).parameters
 
     @property
     def n_residuals(self) -> int:
@@ -111,17 +114,29 @@ class FRFObjective:
         """
         return self._evaluate(theta, want_jac, stop_at_failure=False)
 
-    def _evaluate(self, theta: np.ndarray, want_jac: bool, stop_at_failure: bool):
+    def step_cost(self, row: int, frf: np.ndarray) -> float:
+        """Step ``row``'s term of the cost (its FRFs ``frf``, shape (channels, orders)): the
+        cost is the sum of these non-negative terms over the selected steps."""
+        e = ((frf - self.H[row]) * self._weight[row])[self.mask[row]]
+        return 0.5 * float(np.sum(e.real**2 + e.imag**2))
+
+    def _evaluate(self, theta: np.ndarray, want_jac: bool, stop_at_failure: bool, bound=None):
         self.n_evaluations += 1
         sp = self.space
         p = sp.to_physical(theta)
-        kw = {"stop_at_failure": True} if stop_at_failure else {}
+        kw: dict = {"stop_at_failure": True} if stop_at_failure else {}
+        if bound is not None:
+            kw["bound"] = bound
         try:
             pred = self.predictor.predict(
                 sp.as_dict(p), sp.names if want_jac else (), rows=self.rows, **kw
             )
         except ValueError as exc:
             log.debug("infeasible parameters %s: %s", p, exc)
+            return np.full(self.n_residuals, np.nan), None
+        if (
+            getattr(pred, "floor", None) is not None
+        ):  # stopped above the bound's limit: no residuals
             return np.full(self.n_residuals, np.nan), None
         if not pred.converged[self.rows].all():
             return np.full(self.n_residuals, np.nan), None
@@ -150,6 +165,20 @@ class FRFObjective:
         can): a start far from the data costs a part of a prediction, and every cost is the
         same, bit for bit, as without it.
         """
+        return self.bounded_cost(theta, None, stop_at_failure)[0]
+
+    def bounded_cost(
+        self, theta: np.ndarray, limit: float | None, stop_at_failure: bool | None = None
+    ) -> tuple[float, bool]:
+        """``(cost, exact)`` at ``theta``: :meth:`cost`, except that a prediction whose cost
+        provably exceeds ``limit`` (the sum of its final step terms, :meth:`step_cost`, already
+        does) is stopped there and that lower bound, above ``limit``, is returned with
+        ``exact`` False. ``limit`` None (or a predictor that cannot stop): always exact."""
         stop = self.stop_at_failure if stop_at_failure is None else stop_at_failure
-        r, _ = self._evaluate(theta, False, stop)
-        return 0.5 * float(r @ r) if np.all(np.isfinite(r)) else np.inf
+        bound = None
+        if limit is not None and np.isfinite(limit) and self.can_bound:
+            bound = CostBound(self.step_cost, float(limit))
+        r, _ = self._evaluate(theta, False, stop, bound)
+        if bound is not None and bound.exceeded:
+            return bound.floor, False
+        return (0.5 * float(r @ r) if np.all(np.isfinite(r)) else np.inf), True

@@ -80,6 +80,11 @@ def load_calibration(path: str | Path) -> tuple[NonlinearCalibration, Model, str
         n_residuals=doc["n_residuals"],
         starts=np.array(doc["starts"]),
         start_costs=np.array([np.inf if c is None else c for c in doc["start_costs"]]),
+        start_exact=(
+            None
+            if doc.get("start_cost_exact") is None  # written before starts could be stopped
+            else np.array(doc["start_cost_exact"], bool)
+        ),
         lm=lm,
         space=space,
         settings=settings,

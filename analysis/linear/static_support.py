@@ -32,6 +32,7 @@ class _SupportedBlock:
     drive: Any
     stiffness: float
     _static: tuple | None = field(default=None, init=False, repr=False, compare=False)
+    _dstatic: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -51,6 +52,13 @@ class _SupportedBlock:
         dH = np.array(self.inner.derivative(w, param))
         static = w == 0
         if np.any(static):
+            dH[static] -= self._static_derivative(param)
+        return dH
+
+    def _static_derivative(self, param: str) -> np.ndarray:
+        """The support's term of ``dH(0)/dp`` (fixed, as the static terms are: once per
+        parameter, where a sensitivity asks for it at every step)."""
+        if param not in self._dstatic:
             k = self.stiffness
             a, b, hdd = self._static_terms()
             zero = np.zeros(1)
@@ -58,8 +66,8 @@ class _SupportedBlock:
             db = self.from_drive.derivative(zero, param)[0]
             dhdd = self.drive.derivative(zero, param)[0, 0, 0].real
             D = 1.0 + k * hdd
-            dH[static] -= k * (da @ b + a @ db) / D - k**2 * (a @ b) * dhdd / D**2
-        return dH
+            self._dstatic[param] = k * (da @ b + a @ db) / D - k**2 * (a @ b) * dhdd / D**2
+        return self._dstatic[param]
 
     def _static_terms(self) -> tuple[np.ndarray, np.ndarray, float]:
         # the blocks' receptances are fixed (a model with other values has other blocks), so

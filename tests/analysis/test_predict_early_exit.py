@@ -1,7 +1,9 @@
-"""A start whose prediction fails at a fitted step is scored ``inf`` without solving the rest.
+"""A start whose prediction fails at a fitted step is scored ``inf`` without solving the rest,
+and one whose cost provably exceeds the best known is stopped there.
 
-The early exit (``stop_at_failure``) must leave every start cost, the selected start and the
-calibrated values exactly as they were, and solve fewer steps.
+The early exits (``stop_at_failure``, a :class:`~analysis.predict.CostBound`) must leave the
+selected start and the calibrated values exactly as they were, every start cost the
+calibration ranks by exact (the others lower bounds above the best), and solve fewer steps.
 """
 
 import numpy as np
@@ -50,9 +52,15 @@ def _calibrate(model, data, monkeypatch, early_exit: bool):
     make = nonlinear.make_predictor
     with monkeypatch.context() as m:
         m.setattr(nonlinear, "make_predictor", keep)
-        if not early_exit:
+        if not early_exit:  # every start scored in full, without stopping
             cost = FRFObjective.cost
             m.setattr(FRFObjective, "cost", lambda self, t: cost(self, t, stop_at_failure=False))
+
+            def score_all(spec, thetas, keep, executor, local, on_done, first=None):
+                costs = nonlinear.evaluate_costs(spec, thetas, executor, local, on_done)
+                return costs, np.ones(len(costs), bool)
+
+            m.setattr(nonlinear, "screen_costs", score_all)
         at_lhs = {}
         res = calibrate_nonlinear(
             model,
@@ -69,8 +77,14 @@ def test_early_exit_keeps_every_start_cost_and_the_calibration(run, monkeypatch)
     new, steps_new = _calibrate(model, data, monkeypatch, early_exit=True)
     old, steps_old = _calibrate(model, data, monkeypatch, early_exit=False)
     assert np.isinf(old.start_costs).any() and np.isfinite(old.start_costs).any()
-    # bit for bit: finite costs equal, inf where inf
-    assert np.array_equal(new.start_costs, old.start_costs)
+    assert old.start_exact.all()
+    # where exact, the cost (inf where inf); elsewhere a lower bound of it above the best one
+    ex = new.start_exact
+    # the starts are scored on the lowest level first: a sum in two parts
+    assert np.allclose(new.start_costs[ex], old.start_costs[ex], rtol=1e-12, atol=0.0)
+    best = old.start_costs.min()
+    assert np.all(new.start_costs[~ex] > best)
+    assert np.all(new.start_costs[~ex] <= old.start_costs[~ex] * (1 + 1e-12))
     assert np.argmin(new.start_costs) == np.argmin(old.start_costs)
     assert new.lm.cost == old.lm.cost
     assert new.parameters == old.parameters
@@ -93,6 +107,73 @@ def test_plain_predictor_stops_at_the_first_failed_fitted_step(run):
     assert np.isinf(costs[False]).any()
     assert np.array_equal(costs[True], costs[False])
     assert steps[True] < steps[False]
+
+
+def _paper_objective(model, data, space):
+    pred = nonlinear.make_predictor(model, data, CalibrationSettings())
+    return FRFObjective(pred, space)
+
+
+@pytest.mark.slow
+def test_a_hopeless_start_is_stopped_and_the_best_is_not(run):
+    """A start whose steps already cost more than the best start's whole prediction is stopped
+    with a lower bound between the two; the best start, bounded by a worse one, is computed
+    to the end, bit for bit."""
+    model, data = run
+    space = ParameterSpace.from_model(model, SETTINGS.parameters)
+    starts = latin_hypercube(paper_distributions(1e-3), 6, 0, space.names)
+    lo, hi = space.theta_bounds()
+    thetas = np.clip(space.to_theta(starts), lo, hi)
+    full = _paper_objective(model, data, space)
+    exact = []
+    for t in thetas:
+        before = full.predictor.steps_solved
+        exact.append((full.cost(t), full.predictor.steps_solved - before))
+    costs = np.array([c for c, _ in exact])
+    assert np.isfinite(costs).sum() >= 2
+    best, worst = int(np.argmin(costs)), int(np.argmax(np.where(np.isfinite(costs), costs, -1)))
+    assert costs[worst] > 2 * costs[best]
+    # a fresh predictor: no solution of the full runs above is reused
+    obj = _paper_objective(model, data, space)
+    before = obj.predictor.steps_solved
+    floor, is_exact = obj.bounded_cost(thetas[worst], costs[best])
+    steps = obj.predictor.steps_solved - before
+    assert not is_exact
+    assert costs[best] < floor <= costs[worst] * (1 + 1e-12)
+    assert steps < exact[worst][1]
+    value, is_exact = obj.bounded_cost(thetas[best], costs[worst])
+    assert is_exact
+    assert value == costs[best]
+
+
+@pytest.mark.slow
+def test_screening_keeps_the_best_starts_and_their_costs(run):
+    """``screen_costs`` ranks the starts as ``evaluate_costs`` does where it matters: the
+    ``keep`` best exactly, every other start bounded above the ``keep``-th best."""
+    model, data = run
+    space = ParameterSpace.from_model(model, SETTINGS.parameters)
+    starts = latin_hypercube(paper_distributions(1e-3), 6, 1, space.names)
+    lo, hi = space.theta_bounds()
+    thetas = np.clip(space.to_theta(starts), lo, hi)
+    obj = _paper_objective(model, data, space)
+    spec = nonlinear.ObjectiveSpec(
+        model.to_toml(), str(data.path), space.names, obj.mask, "uncertainty", None, 9, 128
+    )
+    ref = nonlinear.evaluate_costs(spec, thetas, local=obj)
+    keep = 2
+    kth = np.sort(ref)[keep - 1]
+    top = np.argsort(ref)[:keep]
+    lowest = data.levels_n[data.level_index] == data.levels_n.min()
+    for first in (None, lowest):
+        costs, exact = nonlinear.screen_costs(spec, thetas, keep, local=obj, first=first)
+        assert not exact.all()  # some start was stopped
+        assert exact[top].all()
+        # bit for bit in one pass; in two, to the rounding of a sum taken in two parts
+        rtol = 0.0 if first is None else 1e-12
+        assert np.allclose(costs[exact], ref[exact], rtol=rtol, atol=0.0)
+        assert np.all(costs[~exact] > kth)
+        assert np.all(costs[~exact] <= ref[~exact] * (1 + 1e-12))
+        assert np.array_equal(np.argsort(costs)[:keep], top)
 
 
 def test_stepping_one_step_at_a_time_is_solve_steps(run):
