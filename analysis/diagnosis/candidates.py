@@ -335,8 +335,23 @@ POINT_DIRECTIONS = ("x", "y")
 PAIR_REACH = 0.1
 
 
-def default_locations(model: Model) -> list[Location]:
-    """Every place of the model's structure an effect may act, named after what it is.
+#: What each scope of the candidate set holds (:func:`default_locations`). ``"measured"``:
+#: the places the sensors see directly (each point in its measured direction, each group of
+#: springs sharing a parameter, a joint's rotation and transverse direction). ``"structure"``
+#: adds every other direction of a point, each spring alone, a joint's axial direction and the
+#: pairs of nodes: places whose effect the sensors see only through the structure, so several
+#: of them can fit one data set alike (a spring to ground at a post's foot and the mounts
+#: beside it); a diagnosis on that scope needs the separating measurement to name one.
+LOCATION_SCOPES = {
+    "measured": ("point", "group", "joint"),
+    "structure": ("point", "direction", "spring", "group", "joint", "pair"),
+}
+_MEASURED_JOINT_DIRECTIONS = ("rz", "y")
+
+
+def default_locations(model: Model, scope: str = "measured") -> list[Location]:
+    """The places of the model's structure an effect may act in ``scope``
+    (:data:`LOCATION_SCOPES`), named after what they are.
 
     In order: every measurement point in its measured direction (``"point 7"``) and in every
     other direction the structure moves there (``"point 7 x"``); every spring on its own
@@ -365,7 +380,17 @@ def default_locations(model: Model) -> list[Location]:
         locs += _spring_locations(model)
         locs += _joint_locations(model)
         locs += _pair_locations(model, asm, moves)
-    return locs
+    if scope not in LOCATION_SCOPES:
+        raise ValueError(f"locations: expected one of {sorted(LOCATION_SCOPES)}, got {scope!r}")
+    kinds = LOCATION_SCOPES[scope]
+    return [
+        loc
+        for loc in locs
+        if loc.kind in kinds
+        and (
+            scope == "structure" or loc.joint is None or loc.joint[1] in _MEASURED_JOINT_DIRECTIONS
+        )
+    ]
 
 
 def _spring_locations(model: Model) -> list[Location]:
@@ -487,15 +512,17 @@ def default_candidates(
     locations: Sequence[Location] | None = None,
     laws: Sequence[Law] | None = None,
     parameters: Sequence[str] | None = None,
+    scope: str = "measured",
 ) -> list[Candidate]:
     """Every law at every location, joint releases, and each linear parameter of the model.
 
     A mass (at every direction of its node) is a candidate at a point's own location only; a
     released joint gets every law plus its spring alone (``"joint_spring"``: a compliant
     joint, a linear effect). ``parameters`` (default: the model's linear parameters flagged
-    ``calibrate``) become linear candidates.
+    ``calibrate``) become linear candidates. ``scope``: the locations' (:data:`LOCATION_SCOPES`)
+    when ``locations`` is not given.
     """
-    locations = default_locations(model) if locations is None else list(locations)
+    locations = default_locations(model, scope) if locations is None else list(locations)
     laws = default_laws() if laws is None else list(laws)
     out = []
     for loc in locations:

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from analysis.diagnosis.augment import augment
-from analysis.diagnosis.candidates import default_candidates
+from analysis.diagnosis.candidates import LOCATION_SCOPES, default_candidates
 from analysis.diagnosis.compare import compare, uncalibrated_note
 from analysis.diagnosis.diagnose import diagnose
 from analysis.diagnosis.result import DiagnosisSettings
@@ -124,6 +124,7 @@ def _settings(args) -> DiagnosisSettings:
         n_harmonics=args.harmonics,
         n_time=args.samples,
         rescreen_ratio=args.rescreen_ratio,
+        locations=args.locations,
     )
 
 
@@ -170,9 +171,13 @@ def cmd_augment(args) -> dict:
     show = _progress(args.json)
     values = known = None
     if args.candidate:
-        matches = [c for c in default_candidates(model) if c.label == args.candidate]
+        matches = [
+            c for c in default_candidates(model, scope="structure") if c.label == args.candidate
+        ]
         if not matches:
-            labels = "; ".join(c.label for c in default_candidates(model)[:12])
+            labels = "; ".join(
+                c.label for c in default_candidates(model, scope=args.locations)[:12]
+            )
             raise ValueError(f"no candidate {args.candidate!r} (e.g. {labels}; ...)")
         cand = matches[0]
     else:
@@ -253,6 +258,16 @@ def add_parsers(subparsers) -> None:
             f"{DiagnosisSettings.rescreen_ratio}; 0: never)",
         )
 
+    def locations(sp) -> None:
+        sp.add_argument(
+            "--locations",
+            choices=sorted(LOCATION_SCOPES),
+            default=DiagnosisSettings.locations,
+            help="candidate places: 'measured' (each point in its measured direction, spring "
+            "groups, joint rotations; default) or 'structure' (also every other direction, "
+            "each spring alone, pairs of nodes: more look-alikes, ties to separate)",
+        )
+
     sp = subparsers.add_parser("diagnose", help="which physical effect the model misses")
     common(sp)
     sp.add_argument("--linear-run", help="random-excitation test (for linear candidates)")
@@ -264,6 +279,7 @@ def add_parsers(subparsers) -> None:
         help="on a tie, write the measurement that separates it as a rig plan file",
     )
     rescreen(sp)
+    locations(sp)
     sp.set_defaults(func=cmd_diagnose)
 
     sp = subparsers.add_parser("augment", help="add an effect, recalibrate, compare")
@@ -281,6 +297,7 @@ def add_parsers(subparsers) -> None:
     )
     sp.add_argument("--workers", type=int, default=2, help="processes for verifications")
     rescreen(sp)
+    locations(sp)
     sp.set_defaults(func=cmd_augment)
 
 

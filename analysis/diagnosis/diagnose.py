@@ -544,7 +544,9 @@ def diagnose(
     if cmp.rms_over_noise <= st.adequate_rms:
         timings["total_s"] = time.perf_counter() - t0
         return Diagnosis("adequate", cmp, evidence, timings=timings, settings=st)
-    cands = default_candidates(model) if candidates is None else list(candidates)
+    cands = (
+        default_candidates(model, scope=st.locations) if candidates is None else list(candidates)
+    )
     jobs = _Jobs(
         model.to_toml(),
         str(model.source),

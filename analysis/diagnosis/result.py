@@ -72,6 +72,11 @@ class DiagnosisSettings:
         Further starts are tried only for a best candidate that brought the residual of the
         recalibrated model down to this fraction or below (a strong effect stuck in a local
         minimum), not for one that explains little.
+    locations : {"measured", "structure"}
+        The candidate set's places (:data:`~analysis.diagnosis.candidates.LOCATION_SCOPES`):
+        ``"measured"`` the places the sensors see directly, ``"structure"`` also every other
+        direction of a point, each spring alone and pairs of nodes (more look-alikes: a tie
+        there needs the separating measurement).
     rescreen_ratio : float
         When recalibrating the model's own parameters brings its residual to this fraction of
         the calibrated model's or below, the calibration was a poor start (a missing effect
@@ -99,8 +104,14 @@ class DiagnosisSettings:
     time_budget_s: float = 40.0
     restart_fraction: float = 0.2
     rescreen_ratio: float = 0.5
+    locations: str = "measured"
 
     def __post_init__(self) -> None:
+        if self.locations not in ("measured", "structure"):
+            raise ValueError(
+                "DiagnosisSettings.locations: expected 'measured' or 'structure', got "
+                f"{self.locations!r}"
+            )
         if self.adequate_rms <= 0 or self.explained_rms <= 0 or self.tie_bic < 0:
             raise ValueError("DiagnosisSettings: thresholds must be positive")
         if self.n_verify < 1 or self.workers < 1 or self.verify_iterations < 1:

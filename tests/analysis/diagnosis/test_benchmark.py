@@ -34,12 +34,14 @@ def test_every_hidden_effect_names_a_library_candidate(
 
     labels = {
         (c.law.kind, c.location.name, c.law.options.get("side"))
-        for c in default_candidates(reference_model)
+        for c in default_candidates(reference_model, scope="structure")
     }
     for truth, effect in TRUE_EFFECTS.items():
         assert effect in labels, truth
     # the names are the places the truths put their effects at
-    places = {c.location.name: c.location for c in default_candidates(reference_model)}
+    places = {
+        c.location.name: c.location for c in default_candidates(reference_model, scope="structure")
+    }
     for truth, (kind, where, _) in TRUE_EFFECTS.items():
         hidden = [s for s in truth_as_model(truth).nonlinear if s.name != "bump_stop"]
         placed = {

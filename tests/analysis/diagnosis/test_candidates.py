@@ -78,7 +78,7 @@ def test_linear_laws_are_reported_as_linear() -> None:
 def test_locations_come_from_the_structure(reference_model) -> None:
     from analysis.diagnosis.candidates import default_locations
 
-    locs = {loc.name: loc for loc in default_locations(reference_model)}
+    locs = {loc.name: loc for loc in default_locations(reference_model, "structure")}
     kinds: dict[str, set[str]] = {}
     for name, loc in locs.items():
         kinds.setdefault(loc.kind, set()).add(name)
@@ -101,8 +101,28 @@ def test_locations_come_from_the_structure(reference_model) -> None:
     assert not any("point 6 to point 7" in n or "point 7 to point 6" in n for n in kinds["pair"])
     assert not any("beam_root" in n or "left_top" in n for n in kinds["pair"])
     # a mass only at a point's own location (it acts in every direction of its node)
-    masses = {c.location.kind for c in default_candidates(reference_model) if c.law.kind == "mass"}
+    structure = default_candidates(reference_model, scope="structure")
+    masses = {c.location.kind for c in structure if c.law.kind == "mass"}
     assert masses == {"point"}
+
+
+def test_the_measured_scope_is_what_the_sensors_see(reference_model) -> None:
+    from analysis.diagnosis.candidates import default_locations
+
+    locs = default_locations(reference_model)
+    names = [loc.name for loc in locs]
+    # each point in its measured direction, the spring group, the clamp's rotation and
+    # transverse direction: nothing the sensors see only through the structure
+    assert names == [
+        *(f"point {n}" for n in reference_model.points),
+        "springs k_mount",
+        "joint clamp rz",
+        "joint clamp y",
+    ]
+    structure = {loc.name for loc in default_locations(reference_model, "structure")}
+    assert set(names) < structure
+    with pytest.raises(ValueError, match="locations: expected one of"):
+        default_locations(reference_model, "everywhere")
 
 
 def test_springs_not_sharing_a_parameter_form_no_group(reference_model) -> None:
@@ -113,5 +133,5 @@ def test_springs_not_sharing_a_parameter_form_no_group(reference_model) -> None:
     frame = reference_model.frame
     springs = tuple(dataclasses.replace(s, k=2.0e5) for s in frame.springs)
     model = dataclasses.replace(reference_model, frame=dataclasses.replace(frame, springs=springs))
-    kinds = {loc.kind for loc in default_locations(model)}
+    kinds = {loc.kind for loc in default_locations(model, "structure")}
     assert "group" not in kinds and "spring" in kinds
