@@ -147,8 +147,9 @@ def floquet_exponents(
     method : {"hill", "hill_full", "monodromy"}
         See the module's description.
     n_hill : int, optional
-        Harmonics in Hill's matrix (default: the problem's ``n_harmonics``, at least
-        :data:`MIN_HILL_HARMONICS`; ``"hill_full"``: the problem's ``n_harmonics``).
+        Harmonics in Hill's matrix, at most ``(n_time - 1) // 2``. Default: the problem's
+        ``n_harmonics``; for ``"hill"`` at least :data:`MIN_HILL_HARMONICS` (within that
+        bound).
     model : SecondOrderModel, optional
         Default: the problem's time-domain model.
     tol : float
@@ -162,11 +163,7 @@ def floquet_exponents(
         raise ValueError(f"method: expected one of {list(METHODS)}, got {method!r}")
     if mode_cutoff is not None and not mode_cutoff > 0:
         raise ValueError(f"mode_cutoff: expected a positive number or None, got {mode_cutoff!r}")
-    nh = n_hill or problem.n_harmonics
-    if n_hill is None and method == "hill":
-        nh = max(nh, MIN_HILL_HARMONICS)
-    if nh < 1:
-        raise ValueError(f"n_hill: expected a positive integer, got {n_hill!r}")
+    nh = _hill_harmonics(problem, method, n_hill)
     mdl = model or _cached_model(problem)
     Kt, Ct = _tangents(problem, point)
     wb = point.omega / problem.denominator
@@ -222,6 +219,21 @@ def cross_check(
         if st.stable != ref.stable:
             disagree.append(i)
     return CrossCheck(disagree, worst, len(points))
+
+
+def _hill_harmonics(problem: HarmonicProblem, method: str, n_hill: int | None) -> int:
+    """Harmonics of Hill's matrix: as asked, or by default the problem's (``"hill"``: at least
+    :data:`MIN_HILL_HARMONICS`, as many as the AFT samples resolve)."""
+    most = (problem.basis.n_time - 1) // 2
+    if n_hill is None:
+        nh = problem.n_harmonics
+        return min(max(nh, MIN_HILL_HARMONICS), most) if method == "hill" else nh
+    if not 1 <= n_hill <= most:
+        raise ValueError(
+            f"n_hill: expected an integer from 1 to {most} (the problem's n_time = "
+            f"{problem.basis.n_time} samples resolve (n_time - 1) // 2 harmonics), got {n_hill!r}"
+        )
+    return n_hill
 
 
 # -- the modal reduction (once per model) ---------------------------------------------------
