@@ -13,24 +13,35 @@ harmonics beyond ``n_hill``), and the coefficients of the linearisation reach on
 quasi-statically: their static flexibility ``R`` at the nonlinear DOFs turns the nodal tangent
 stiffness ``k_t(t)`` into ``(I - k_t R)^-1 k_t`` (and the tangent damping likewise), sample by
 sample. Hill's matrix is then ``2 (2 n_hill + 1) m_kept`` square and real (cosine/sine basis),
-a few modes instead of every DOF of the model: on the 24-DOF cantilever of the examples, 1-3
-modes at ``n_hill = 5..20``.
+a few modes instead of every DOF of the model: on the 24-DOF cantilever of the examples, 2-3
+modes at ``n_hill = 10..20``. This form was chosen over the receptance form on the nonlinear
+DOFs (small, but nonlinear in the exponent: a Newton search per exponent loses exponents where
+they collide, at folds and period doubling) and over shift-invert Arnoldi on the full matrix
+(no single shift reaches every exponent in the band before the copies of others); see
+``docs/mhb.md``.
 
-The eigenvalues alone are computed (no eigenvectors, which cost as much again). The physical
-exponents are picked by Hill's own shift invariance: each Floquet exponent ``lambda`` of the
-infinite problem appears in the truncated matrix as a ladder of copies ``lambda + i j omega_b``,
-one per harmonic that the truncation can hold, while the truncation's artefacts (eigenvectors
-piled up on the highest harmonics) do not repeat. Folded into the band
-``|Im| <= omega_b / 2``, a ladder collapses onto one point; the ``2 m_kept`` points supported
-by the most copies are the exponents, each taken from the rung in the middle of its ladder
-(the copy whose eigenvector sits on the central harmonics, the best converged; Lazarus &
-Thomas's criterion without computing the eigenvector), reported folded into the band.
+Hill's truncation is the perturbation's, not the solution's: by default ``n_hill`` is the
+problem's ``n_harmonics`` but at least :data:`MIN_HILL_HARMONICS`, within what the AFT
+samples resolve. A contact's tangent is a pulse per period whose Fourier series converges
+slowly; the exponents follow it, not the solution's harmonics.
 
-``method="hill_full"`` is the former form: Hill's matrix of every DOF of the model with
-eigenvectors, the band's exponents picked by their weight on the central harmonic. It costs a
-dense eigen-decomposition of ``2 (2 n_hill + 1) m`` (``m`` the model's size) and is kept for
-comparison. ``method="monodromy"`` multiplies the exact transition matrices of the
-piecewise-constant linearisation over the AFT samples, on the full model: an independent
+The eigenvalues alone are computed (the eigenvectors cost as much again). The physical
+exponents are picked by Hill's own shift invariance: each Floquet exponent ``lambda`` appears
+in the truncated matrix as a ladder of copies ``lambda + i j omega_b``, one per harmonic that
+the truncation holds, converged in the middle and worst at the ends; the truncation's
+artefacts do not form ladders. The eigenvalue whose rungs above and below are matched most
+closely by other eigenvalues is the best converged copy of its ladder (the one whose
+eigenvector sits on the central harmonics: Lazarus & Thomas's criterion, without the
+eigenvector); it is taken, its ladder walked one eigenvalue per rung and set aside, and so on
+until ``2 m_kept`` exponents are taken. They are reported folded into the band
+``|Im| <= omega_b / 2``.
+
+``method="hill_full"``: Hill's matrix of every DOF of the model with eigenvectors, the band's
+exponents picked by their weight on the central harmonic, at the problem's own truncation by
+default (whose real exponent then crosses zero exactly at the folds of the computed branch).
+It costs a dense complex eigen-decomposition of ``2 (2 n_hill + 1) m`` (``m`` the model's
+size). ``method="monodromy"`` multiplies the exact transition matrices of the
+piecewise-constant linearisation over the AFT samples, on the full model: the independent
 reference, first order in ``1 / n_time``.
 
 References
