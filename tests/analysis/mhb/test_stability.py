@@ -134,3 +134,14 @@ def test_beam_curve_verdicts_and_multipliers_agree_with_the_monodromy_matrix(n_h
     assert check.agrees and check.multiplier_rel_err < MULTIPLIER_RTOL
     stable = [floquet_exponents(pb, p).stable for p in br.points]
     assert not all(stable) and any(stable)
+
+
+def test_bad_options_are_named():
+    pb, br = _example("impact_oscillator").curve(stability=False)
+    p = br.points[0]
+    with pytest.raises(ValueError, match="n_hill: expected an integer from 1 to 127"):
+        floquet_exponents(pb, p, n_hill=200)
+    with pytest.raises(ValueError, match="method: expected one of"):
+        floquet_exponents(pb, p, method="floquet")
+    with pytest.raises(ValueError, match="mode_cutoff: expected a positive number"):
+        floquet_exponents(pb, p, mode_cutoff=0.0)
