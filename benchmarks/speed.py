@@ -141,16 +141,16 @@ def sim_figures(quick: bool = False) -> dict:
 
     def timed(truth: str, folder: Path) -> float | None:
         try:
-            return round(paper_run_s(truth, 1, folder / truth, SIM_TIMEOUT_S), 1)
+            s = round(paper_run_s(truth, 1, folder / truth, SIM_TIMEOUT_S), 1)
         except (RuntimeError, subprocess.TimeoutExpired) as exc:
             print(f"  {truth}: {exc}", file=sys.stderr)
             return None
+        print(f"  simulated paper run, {truth}: {s} s", flush=True)
+        return s
 
     with tempfile.TemporaryDirectory() as tmp, cf.ThreadPoolExecutor(PARALLEL) as ex:
         runs = {t: ex.submit(timed, t, Path(tmp)) for t in list_truths()}
         secs = {t: f.result() for t, f in runs.items()}
-    for t, s in secs.items():
-        print(f"  simulated paper run, {t}: {s} s")
     done = [s for s in secs.values() if s is not None]
     ref = secs.get("reference")
     worst = None if None in secs.values() else max(done)
