@@ -21,6 +21,7 @@ SCENARIOS = {
     "mhb": "benchmarks.mhb",
     "planning": "benchmarks.planning",
     "service": "benchmarks.service",
+    "speed": "benchmarks.speed",
 }
 
 

@@ -29,7 +29,8 @@ EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 K3, C, F = 0.5, 0.05, 0.1  # examples/duffing.toml
 
 
-def _example(name: str):
+def load_example(name: str):
+    """The script ``examples/NAME.py`` as a module."""
     spec = importlib.util.spec_from_file_location(f"example_{name}", EXAMPLES / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -52,7 +53,7 @@ def _closed_form(a0: float, w0: float, kind: str) -> tuple[float, float]:
 
 
 def _located_errors() -> float:
-    _, branch = _example("duffing").curve(n_harmonics=1)
+    _, branch = load_example("duffing").curve(n_harmonics=1)
     errors = []
     for loc in branch.turning_points() + branch.peaks():
         _, w = _closed_form(loc.amplitude, loc.omega, loc.kind)
@@ -96,7 +97,7 @@ def run(quick: bool = False) -> dict:
     names = ["duffing"] if quick else ["duffing", "two_dof_hertz", "cantilever_tip_contact"]
     for name in names:
         t0 = time.perf_counter()
-        _, branch = _example(name).curve()
+        _, branch = load_example(name).curve()
         folds = branch.turning_points()
         wall = time.perf_counter() - t0
         figures[f"{name}_s"] = round(wall, 3)

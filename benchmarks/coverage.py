@@ -53,9 +53,11 @@ def _run_key(truth: str, seed: int) -> str:
     return _key(text, *plans, setup, str(seed), _code_version(FRONT_ENDS))
 
 
-def _rig(argv: list[str], log_file: Path) -> None:
+def _rig(argv: list[str], log_file: Path, timeout: float | None = None) -> None:
     with log_file.open("a") as fh:
-        r = subprocess.run([sys.executable, "-m", "rig", *argv], stdout=fh, stderr=fh, cwd=ROOT)
+        r = subprocess.run(
+            [sys.executable, "-m", "rig", *argv], stdout=fh, stderr=fh, cwd=ROOT, timeout=timeout
+        )
     if r.returncode != 0:
         raise RuntimeError(f"rig {' '.join(argv[:2])} failed (exit {r.returncode}): see {log_file}")
 
@@ -71,7 +73,16 @@ def make_runs(truth: str, seed: int) -> tuple[Path, Path, float]:
     shutil.rmtree(folder, ignore_errors=True)
     folder.mkdir(parents=True)
     t0 = time.perf_counter()
-    common = [
+    common = sim_arguments(truth, seed, folder)
+    _rig(["linear", "linear", "--out", str(lin), *common], folder / "rig.log")
+    _rig(["run", "paper", "--out", str(paper), *common], folder / "rig.log")
+    done.write_text("")
+    return lin, paper, time.perf_counter() - t0
+
+
+def sim_arguments(truth: str, seed: int, folder: Path) -> list[str]:
+    """The rig command line's options for a quiet run of the simulated rig."""
+    return [
         "--backend",
         "sim",
         "--truth",
@@ -83,10 +94,16 @@ def make_runs(truth: str, seed: int) -> tuple[Path, Path, float]:
         "--lock-dir",
         str(folder / "locks"),
     ]
-    _rig(["linear", "linear", "--out", str(lin), *common], folder / "rig.log")
-    _rig(["run", "paper", "--out", str(paper), *common], folder / "rig.log")
-    done.write_text("")
-    return lin, paper, time.perf_counter() - t0
+
+
+def paper_run_s(truth: str, seed: int, folder: Path, timeout: float | None = None) -> float:
+    """Wall time of ``rig run paper`` on the simulated rig of ``truth`` (written to
+    ``folder``, never cached); ``subprocess.TimeoutExpired`` after ``timeout`` seconds."""
+    folder.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    argv = ["run", "paper", "--out", str(folder / "paper.h5"), *sim_arguments(truth, seed, folder)]
+    _rig(argv, folder / "rig.log", timeout)
+    return time.perf_counter() - t0
 
 
 def cases(quick: bool = False) -> list[tuple[str, int]]:

@@ -24,7 +24,11 @@ RANGE_HZ = (30.0, 60.0)
 
 
 def curve(
-    values: dict | None = None, force: float = FORCE_N, range_hz=RANGE_HZ, stability: bool = False
+    values: dict | None = None,
+    force: float = FORCE_N,
+    range_hz=RANGE_HZ,
+    stability: bool = True,
+    n_harmonics: int = 9,
 ):
     """The continued branch and its problem (``values`` overrides model parameters)."""
     model = load_model(HERE / "cantilever_tip_contact.toml")
@@ -32,10 +36,8 @@ def curve(
     tip = model.assemble().point_dof(1)
     # 512 samples: at 128 the Hertz law's onset between samples puts small wiggles, with a
     # pair of extra folds, near the upper fold
-    pb = build_problem_dofs(model, [tip], [tip], orders=[1], n_harmonics=9, n_time=512)
+    pb = build_problem_dofs(model, [tip], [tip], orders=[1], n_harmonics=n_harmonics, n_time=512)
     w0, w1 = (2 * np.pi * f for f in range_hz)
-    # Hill's stability matrix of the 24 structural DOFs (456 x 456 at H = 9) would cost more
-    # than the curve itself; the folds bound the unstable part here
     settings = ContinuationSettings(max_angle=0.1, stability=stability)
     return pb, continue_branch(pb, w0, w1, np.array([force], dtype=complex), settings)
 
