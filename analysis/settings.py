@@ -46,10 +46,13 @@ __all__ = [
     "DeclaredField",
     "Flag",
     "Integer",
+    "NonNegative",
     "Number",
+    "Positive",
     "SettingError",
     "Text",
     "build",
+    "declare",
     "declared_fields",
     "dump",
     "settings",
@@ -111,6 +114,14 @@ Number = Annotated[float, Strict()]
 Integer = Annotated[int, Strict()]
 Flag = Annotated[bool, Strict()]
 Text = Annotated[str, Strict()]
+Positive = Annotated[Number, Field(gt=0)]
+NonNegative = Annotated[Number, Field(ge=0)]
+
+
+def declare(doc: str, default: Any = ..., **bounds: Any) -> Any:
+    """A declared setting's default (``...``: required), one-line doc and bounds
+    (``gt``, ``ge``, ``lt``, ``le``, ``min_length``)."""
+    return Field(default, description=doc, **bounds)
 
 
 class SettingError(ValueError):
@@ -220,8 +231,9 @@ def settings(*, kw_only: bool = False) -> Callable[[type[T]], type[T]]:
     return make
 
 
-def build(cls: type[T], data: Any, source: str) -> T:
-    """Read plain data into the settings class ``cls``.
+def build(cls: type[T], data: Any, source: str, at: KeyPath = ()) -> T:
+    """Read plain data into the settings class ``cls``; ``at`` is where the data sit in the
+    document (``("truth", "noise")``), put before the key path of an error.
 
     Raises
     ------
@@ -230,12 +242,12 @@ def build(cls: type[T], data: Any, source: str) -> T:
         its ``__cause__`` is the exception a cross-field check raised, if one did.
     """
     if not isinstance(data, Mapping):
-        raise ConfigError(source, (), f"expected a table, got {data!r}")
+        raise ConfigError(source, at, f"expected a table, got {data!r}")
     try:
         return _adapter(cls).validate_python(dict(data))
     except _ValidationError as exc:
         first = _first_error(cls, exc)
-        raise ConfigError(source, first.path, first.problem) from first.__cause__
+        raise ConfigError(source, (*at, *first.path), first.problem) from first.__cause__
 
 
 def dump(value: Any) -> dict[str, Any]:
