@@ -191,7 +191,8 @@ def _first_error(cls: type, exc: _ValidationError) -> ConfigError:
         problem = f"unknown key(s) {', '.join(map(repr, keys))} (known here: {known})"
         return ConfigError("", table, problem)
     err = errors[0]
-    path: KeyPath = _file_path(cls, tuple(err["loc"]))
+    # a table's key is located as (..., key, "[key]"): the key is the location
+    path: KeyPath = _file_path(cls, tuple(p for p in err["loc"] if p != "[key]"))
     cause: BaseException | None = None
     if err["type"] in ("value_error", "assertion_error"):
         where, problem, cause = _value_error(err)
@@ -231,9 +232,16 @@ def settings(*, kw_only: bool = False) -> Callable[[type[T]], type[T]]:
     return make
 
 
-def build(cls: type[T], data: Any, source: str, at: KeyPath = ()) -> T:
+def build(
+    cls: type[T],
+    data: Any,
+    source: str,
+    at: KeyPath = (),
+    error: Callable[[str, KeyPath, str], ConfigError] = ConfigError,
+) -> T:
     """Read plain data into the settings class ``cls``; ``at`` is where the data sit in the
-    document (``("truth", "noise")``), put before the key path of an error.
+    document (``("truth", "noise")``), put before the key path of an error, and ``error``
+    makes the error (a reader's own :class:`ConfigError` subclass).
 
     Raises
     ------
@@ -242,12 +250,12 @@ def build(cls: type[T], data: Any, source: str, at: KeyPath = ()) -> T:
         its ``__cause__`` is the exception a cross-field check raised, if one did.
     """
     if not isinstance(data, Mapping):
-        raise ConfigError(source, at, f"expected a table, got {data!r}")
+        raise error(source, at, f"expected a table, got {data!r}")
     try:
         return _adapter(cls).validate_python(dict(data))
     except _ValidationError as exc:
         first = _first_error(cls, exc)
-        raise ConfigError(source, (*at, *first.path), first.problem) from first.__cause__
+        raise error(source, (*at, *first.path), first.problem) from first.__cause__
 
 
 def dump(value: Any) -> dict[str, Any]:

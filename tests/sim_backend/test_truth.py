@@ -254,6 +254,7 @@ def test_reference_truth_table_reads_to_the_values_the_file_gives() -> None:
         gain_v_per_v=10.0, bandwidth_hz=20000.0, current_limit_a=5.0, output_resistance_ohm=0.05
     )
     assert truth.sensors == SensorDefaults(0.0055, 0.01, 16)
+    assert truth.model.damping.per_mode == {1: 0.04, 2: 0.04, 3: 0.04, 4: 0.006, 5: 0.008}
     assert isinstance(truth.shaker.armature_mass_kg, float)
 
 
