@@ -179,14 +179,16 @@ class MeasurementPoint:
     )
 
 
-def _coefficient(value: Any) -> float | str:
-    if isinstance(value, str):
-        return value
+def _finite(value: Any, path: KeyPath = ()) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise SettingError((), f"expected a number or a parameter name, got {value!r}")
+        raise SettingError(path, f"expected a number, got {value!r}")
     if not math.isfinite(value):
-        raise SettingError((), f"expected a finite number, got {value!r}")
+        raise SettingError(path, f"expected a finite number, got {value!r}")
     return float(value)
+
+
+def _coefficient(value: Any) -> float | str:
+    return value if isinstance(value, str) else _finite(value)
 
 
 #: A number or the name of a model parameter.
@@ -230,10 +232,8 @@ def _rayleigh(value: Any) -> tuple[float, float]:
     else:
         raise SettingError((), f"expected a table of alpha and beta, got {value!r}")
     for k, v in named:
-        if isinstance(v, bool) or not isinstance(v, int | float):
-            raise SettingError((k,), f"expected a number, got {v!r}")
-        if not (math.isfinite(v) and v >= 0):
-            raise SettingError((k,), f"must be finite and >= 0, got {v!r}")
+        if _finite(v, (k,)) < 0:
+            raise SettingError((k,), f"must be >= 0, got {v!r}")
     return float(named[0][1]), float(named[1][1])
 
 
@@ -248,10 +248,7 @@ def _matrix(value: Any) -> tuple[tuple[float, ...], ...] | str:
     for i, row in enumerate(value):
         if not isinstance(row, list | tuple):
             raise SettingError((i,), f"expected an array, got {row!r}")
-        for j, v in enumerate(row):
-            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-                raise SettingError((i, j), f"expected a finite number, got {v!r}")
-        rows.append(tuple(float(v) for v in row))
+        rows.append(tuple(_finite(v, (i, j)) for j, v in enumerate(row)))
     if not rows or any(len(row) != len(rows) for row in rows):
         raise SettingError((), "expected a square array of rows")
     return tuple(rows)
@@ -349,16 +346,11 @@ class _Reader:
             self.fail((*path, key), "missing")
         return t[key]
 
-    def number(self, value: Any, path: KeyPath) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            self.fail(path, f"expected a number, got {value!r}")
-        return float(value)
-
     def finite(self, value: Any, path: KeyPath) -> float:
-        x = self.number(value, path)
-        if not math.isfinite(x):
-            self.fail(path, f"expected a finite number, got {value!r}")
-        return x
+        try:
+            return _finite(value)
+        except SettingError as exc:
+            self.fail(path, exc.problem)
 
     def coordinate(self, value: Any, path: KeyPath) -> float:
         x = self.finite(value, path)
@@ -372,10 +364,7 @@ class _Reader:
         return value
 
     def coef(self, value: Any, path: KeyPath) -> float | str:
-        try:
-            return _coefficient(value)
-        except SettingError as exc:
-            self.fail(path, exc.problem)
+        return value if isinstance(value, str) else self.finite(value, path)
 
     def direction(self, value: Any, path: KeyPath, allowed: tuple[str, ...] = DIRECTIONS) -> str:
         if value not in allowed:

@@ -488,7 +488,7 @@ def test_shipped_model_files_round_trip(tmp_path, path):
         ("[parameters.E]", "[damping.per_mode]\nx = 0.1\n[parameters.E]",
          ("damping", "per_mode", "x"), "mode numbers start at 1"),
         ("[parameters.E]", "[damping.rayleigh]\nalpha = -1.0\n[parameters.E]",
-         ("damping", "rayleigh", "alpha"), "must be finite and >= 0"),
+         ("damping", "rayleigh", "alpha"), "must be >= 0, got -1.0"),
         ("[parameters.E]", "[damping]\nmatrix = [[1.0, 2.0]]\n[parameters.E]",
          ("damping", "matrix"), "square"),
     ],
