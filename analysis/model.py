@@ -373,10 +373,8 @@ class Model:
         at = self._ref((*path, "at"), spec.at, index)
         to = None if spec.to is None else self._ref((*path, "to"), spec.to, index)
         for k, v in spec.params.items():
-            if isinstance(v, str):
+            if isinstance(v, str):  # numbers were checked by NonlinearSpec's declaration
                 self._use((*path, "params", k), v, "nonlinear")
-            elif isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-                raise SpecError((*path, "params", k), f"expected a number or a name, got {v!r}")
         return dataclasses.replace(
             spec, at=at, to=to, params=dict(spec.params), options=dict(spec.options)
         )
