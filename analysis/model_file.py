@@ -372,15 +372,13 @@ class _Reader:
         return value
 
     def make(self, cls: type, path: KeyPath, **kwargs: Any) -> Any:
-        """``cls(**kwargs)`` of a frame record; its ``"field: problem"`` error is located at
-        the field's file key below ``path``."""
+        """``cls(**kwargs)`` of a frame record; its error is located at the field's file key
+        below ``path``."""
         try:
             return cls(**kwargs)
-        except ValueError as exc:
-            name, sep, problem = str(exc).partition(": ")
-            if sep and name.isidentifier():
-                self.fail((*path, _FILE_KEYS.get(name, name)), problem)
-            self.fail(path, str(exc))
+        except SettingError as exc:
+            where = (_FILE_KEYS.get(p, p) if isinstance(p, str) else p for p in exc.path)
+            self.fail((*path, *where), exc.problem)
 
 
 def _section(r: _Reader, t: dict, path: KeyPath) -> Section:

@@ -128,9 +128,9 @@ class SettingError(ValueError):
     """A problem found by a check of several fields, at ``path`` relative to the class."""
 
     def __init__(self, path: KeyPath, problem: str) -> None:
-        super().__init__(problem)
         self.path = tuple(path)
         self.problem = problem
+        super().__init__(f"{dotted(self.path)}: {problem}" if self.path else problem)
 
 
 # ------------------------------------------------------------------------ reading

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..settings import KeyPath, dotted
+from ..settings import KeyPath, SettingError, dotted
 from .beam import Section, mass_matrix, stiffness_matrix
 
 __all__ = [
@@ -81,16 +81,16 @@ class Member:
 
     def __post_init__(self) -> None:
         if len(self.nodes) != 2 or self.nodes[0] == self.nodes[1]:
-            raise ValueError(f"nodes: need two different nodes, got {self.nodes!r}")
+            raise SettingError(("nodes",), f"need two different nodes, got {self.nodes!r}")
         if (self.elements is None) == (self.max_element_length_m is None):
-            raise ValueError("give exactly one of 'elements' and 'max_element_length'")
+            raise SettingError((), "give exactly one of 'elements' and 'max_element_length'")
         if self.elements is not None and not (
             isinstance(self.elements, int) and self.elements >= 1
         ):
-            raise ValueError(f"elements: must be a positive integer, got {self.elements!r}")
+            raise SettingError(("elements",), f"must be a positive integer, got {self.elements!r}")
         if self.max_element_length_m is not None and not self.max_element_length_m > 0:
-            raise ValueError(
-                f"max_element_length: must be positive, got {self.max_element_length_m!r}"
+            raise SettingError(
+                ("max_element_length_m",), f"must be positive, got {self.max_element_length_m!r}"
             )
 
 
