@@ -41,6 +41,7 @@ from .model_file import (
     parse_document,
     to_document,
 )
+from .settings import KeyPath, dotted
 
 __all__ = [
     "REFERENCE_RIG",
@@ -210,13 +211,13 @@ class Model:
         try:
             doc = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
-            raise ModelFileError(source, "", f"invalid TOML: {exc}") from None
+            raise ModelFileError(source, (), f"invalid TOML: {exc}") from None
         try:
             model = cls(**parse_document(doc, source, allow_truth=allow_truth))
         except (ArithmeticError, np.linalg.LinAlgError) as exc:
             raise ModelFileError(
                 source,
-                "",
+                (),
                 f"the model cannot be built ({type(exc).__name__}: {exc}); check "
                 "for extreme values (coordinates, sections, materials, springs)",
             ) from None
@@ -242,16 +243,17 @@ class Model:
             try:
                 self.build_elements_of((spec,))
             except ModelFileError as exc:
-                path, problem = exc.path.replace("nonlinear[0]", f"nonlinear[{i}]"), exc.problem
+                # the element was built alone, as nonlinear[0]: name its index in the model
+                path, problem = ("nonlinear", i, *exc.path[2:]), exc.problem
                 m = re.search(r"parameter\(?s?\)? \[?'(\w+)'", problem)
-                if path == f"nonlinear[{i}]" and m and m.group(1) in spec.params:
+                if path == ("nonlinear", i) and m and m.group(1) in spec.params:
                     key = m.group(1)
-                    path = f"nonlinear[{i}].params.{key}"
+                    path = ("nonlinear", i, "params", key)
                     ref = spec.params[key]
                     if isinstance(ref, str):
                         problem = f"{problem} (parameters.{ref}.value = {values[ref]!r})"
-                elif path == f"nonlinear[{i}]" and m and "unknown" in problem:
-                    path = f"nonlinear[{i}].params.{m.group(1)}"
+                elif path == ("nonlinear", i) and m and "unknown" in problem:
+                    path = ("nonlinear", i, "params", m.group(1))
                 raise ModelFileError(self.source, path, problem) from None
 
     def warn_out_of_bounds(self) -> list[str]:
@@ -278,10 +280,10 @@ class Model:
     def _validate(self) -> None:
         object.__setattr__(self, "parameters", dict(self.parameters))
         if (self.frame is None) == (self.linear_part is None):
-            raise SpecError("", "a model needs exactly one of a frame and a linear part")
+            raise SpecError((), "a model needs exactly one of a frame and a linear part")
         for name, p in self.parameters.items():
             if name != p.name:
-                raise SpecError(f"parameters.{name}", f"holds parameter {p.name!r}")
+                raise SpecError(("parameters", name), f"holds parameter {p.name!r}")
         if self.frame is not None:
             self._check_coefficients()
         index, node_xy = self._dof_map()
@@ -292,14 +294,14 @@ class Model:
         )
         names = [s.name for s in self.nonlinear]
         if dup := {n for n in names if names.count(n) > 1}:
-            raise SpecError("nonlinear", f"duplicate element name(s) {sorted(dup)}")
+            raise SpecError(("nonlinear",), f"duplicate element name(s) {sorted(dup)}")
         object.__setattr__(
             self,
             "nonlinear",
             tuple(self._check_spec(i, s, index) for i, s in enumerate(self.nonlinear)),
         )
 
-    def _use(self, path: str, name: str, group: str) -> Parameter:
+    def _use(self, path: KeyPath, name: str, group: str) -> Parameter:
         if name not in self.parameters:
             raise SpecError(path, f"unknown parameter {name!r}")
         p = self.parameters[name]
@@ -313,8 +315,9 @@ class Model:
                 p = self._use(path, coef, "linear")
                 if p.value < 0 or (positive and p.value == 0):
                     raise SpecError(
-                        f"parameters.{coef}.value",
-                        f"{p.value!r} used by {path} must be {'> 0' if positive else '>= 0'}",
+                        ("parameters", coef, "value"),
+                        f"{p.value!r} used by {dotted(path)} must be "
+                        f"{'> 0' if positive else '>= 0'}",
                     )
 
     def _dof_map(self) -> tuple[Mapping, Mapping]:
@@ -327,36 +330,36 @@ class Model:
         part = self._shared.part
         for node, m in self.linear_part.masses.items():
             if not any(n == node for n, _ in part.dofs):
-                raise SpecError(f"linear_part.masses.{node}", "unknown node")
+                raise SpecError(("linear_part", "masses", node), "unknown node")
             if not (math.isfinite(m) and m >= 0):
-                raise SpecError(f"linear_part.masses.{node}", f"must be >= 0, got {m!r}")
+                raise SpecError(("linear_part", "masses", node), f"must be >= 0, got {m!r}")
         return {d: i for i, d in enumerate(part.dofs)}, part.node_xy
 
     def _point(self, p: MeasurementPoint, index: Mapping, node_xy: Mapping) -> MeasurementPoint:
-        path = f"points.{p.number}"
+        path = ("points", str(p.number))  # a table key in the file
         node = p.node
         if not node:
             hits = [n for n, xy in node_xy.items() if math.dist(xy, p.xy) <= 1e-6]
             if not hits:
-                raise SpecError(f"{path}.xy", f"{list(p.xy)} lies on no node")
+                raise SpecError((*path, "xy"), f"{list(p.xy)} lies on no node")
             if len(hits) > 1:
-                raise SpecError(f"{path}.xy", f"coincident nodes {hits} here; name the node")
+                raise SpecError((*path, "xy"), f"coincident nodes {hits} here; name the node")
             node = hits[0]
         elif not any(n == node for n, _ in index) and node not in node_xy:
-            raise SpecError(f"{path}.node", f"unknown node {node!r}")
+            raise SpecError((*path, "node"), f"unknown node {node!r}")
         xy = node_xy.get(node)
         if p.xy is not None and xy is not None and math.dist(xy, p.xy) > 1e-6:
-            raise SpecError(f"{path}.xy", f"{list(p.xy)} is not at node {node!r} {list(xy)}")
+            raise SpecError((*path, "xy"), f"{list(p.xy)} is not at node {node!r} {list(xy)}")
         if (node, p.direction) not in index:
             raise SpecError(path, f"DOF {node}/{p.direction} is not a free DOF of the model")
         xy = xy if xy is not None else p.xy
         return dataclasses.replace(p, node=node, xy=None if xy is None else tuple(xy))
 
-    def _ref(self, path: str, ref: DofRef, index: Mapping) -> DofRef:
+    def _ref(self, path: KeyPath, ref: DofRef, index: Mapping) -> DofRef:
         node, direction = ref.node, ref.direction
         if ref.point is not None:
             if ref.point not in self.points:
-                raise SpecError(f"{path}.point", f"unknown measurement point {ref.point}")
+                raise SpecError((*path, "point"), f"unknown measurement point {ref.point}")
             node, direction = (
                 self.points[ref.point].node,
                 direction or self.points[ref.point].direction,
@@ -366,14 +369,12 @@ class Model:
         return DofRef(node=node, direction=direction, point=ref.point)
 
     def _check_spec(self, i: int, spec: NonlinearSpec, index: Mapping) -> NonlinearSpec:
-        path = f"nonlinear[{i}]"
-        at = self._ref(f"{path}.at", spec.at, index)
-        to = None if spec.to is None else self._ref(f"{path}.to", spec.to, index)
+        path = ("nonlinear", i)
+        at = self._ref((*path, "at"), spec.at, index)
+        to = None if spec.to is None else self._ref((*path, "to"), spec.to, index)
         for k, v in spec.params.items():
-            if isinstance(v, str):
-                self._use(f"{path}.params.{k}", v, "nonlinear")
-            elif isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-                raise SpecError(f"{path}.params.{k}", f"expected a number or a name, got {v!r}")
+            if isinstance(v, str):  # numbers were checked by NonlinearSpec's declaration
+                self._use((*path, "params", k), v, "nonlinear")
         return dataclasses.replace(
             spec, at=at, to=to, params=dict(spec.params), options=dict(spec.options)
         )
@@ -463,14 +464,14 @@ class Model:
             if spec.kind not in ELEMENT_TYPES:
                 raise ModelFileError(
                     self.source,
-                    f"nonlinear[{i}].kind",
+                    ("nonlinear", i, "kind"),
                     f"unknown element kind {spec.kind!r}; known: {sorted(ELEMENT_TYPES)}",
                 )
             kw = {k: values[v] if isinstance(v, str) else v for k, v in spec.params.items()}
             try:
                 out.append((spec, make_element(spec.kind, **kw, **spec.options)))
             except (TypeError, ValueError) as exc:
-                raise ModelFileError(self.source, f"nonlinear[{i}]", str(exc)) from None
+                raise ModelFileError(self.source, ("nonlinear", i), str(exc)) from None
         return out
 
     def with_damping(self, damping: DampingSpec) -> Model:
@@ -525,7 +526,7 @@ class Model:
         if asm.C is not None:
             raise ModelFileError(
                 self.source,
-                "damping",
+                ("damping",),
                 "the linear part brings its own C matrix; drop "
                 "damping.rayleigh / damping.matrix or the linear part's C",
             )
@@ -551,16 +552,16 @@ class Model:
                 C = src
             C = np.array(C, dtype=float)
         except (OSError, ValueError) as exc:
-            raise ModelFileError(self.source, "damping.matrix", str(exc)) from None
+            raise ModelFileError(self.source, ("damping", "matrix"), str(exc)) from None
         if C.shape != (n, n):
             raise ModelFileError(
                 self.source,
-                "damping.matrix",
+                ("damping", "matrix"),
                 f"expected {n} x {n} (the model's free DOFs, "
                 f"in the order of Model.assemble().dofs), got {' x '.join(map(str, C.shape))}",
             )
         if not np.all(np.isfinite(C)):
-            raise ModelFileError(self.source, "damping.matrix", "has non-finite entries")
+            raise ModelFileError(self.source, ("damping", "matrix"), "has non-finite entries")
         return C
 
     def assemble(self) -> Assembly:
@@ -655,7 +656,7 @@ def _load_part(spec: LinearPartSpec) -> LinearPart:
     try:
         return import_linear(files, spec.format, dof_map=dof_map, dofs=inline)
     except (OSError, ValueError, KeyError) as exc:
-        raise SpecError("linear_part", str(exc)) from None
+        raise SpecError(("linear_part",), str(exc)) from None
 
 
 def load_model(path: str | Path | None = None, *, allow_truth: bool = False) -> Model:

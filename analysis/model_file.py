@@ -11,13 +11,30 @@ Every error names the file, the key path (``members[3].section``) and the proble
 from __future__ import annotations
 
 import math
+import numbers
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal, NoReturn, TypeVar
+
+from pydantic import Field, PlainSerializer, PlainValidator, Strict
 
 from .fe import DIRECTIONS, FrameSpec, Joint, LumpedMass, Material, Member, Section, Spring
 from .matrix_io import FORMATS, IMPORT_DIRECTIONS
+from .settings import (
+    ConfigError,
+    Flag,
+    Integer,
+    KeyPath,
+    Number,
+    Positive,
+    SettingError,
+    Text,
+    build,
+    declare,
+    settings,
+)
 
 __all__ = [
     "DampingSpec",
@@ -62,18 +79,25 @@ _FILE_KEYS = {
     "max_element_length_m": "max_element_length",
 }
 DAMPING_MODAL = ("default_zeta", "per_mode")
+T = TypeVar("T")
 _FRAME_KEYS = ("nodes", "sections", "materials", "members", "joints", "springs", "masses")
 
 
-class ModelFileError(ValueError):
-    """An invalid model file or model: ``"<source>: <key path>: <problem>"``."""
+class ModelFileError(ConfigError):
+    """An invalid model file or model: ``"<source>: <key path>: <problem>"``, with the key path
+    as a tuple in :attr:`path` (``("members", 3, "section")``)."""
 
-    def __init__(self, source: str, path: str, problem: str) -> None:
-        self.source, self.path, self.problem = source, path, problem
-        super().__init__(f"{source}: {path}: {problem}" if path else f"{source}: {problem}")
+    def __init__(self, source: str, path: KeyPath, problem: str) -> None:
+        super().__init__(source, path, problem)
+        if not self.path:  # a problem of the whole file reads "<source>: <problem>"
+            ValueError.__init__(self, f"{source}: {problem}")
 
 
-@dataclass(frozen=True)
+# Lower and upper bounds may be infinite (no bound), never NaN (checked below).
+Bound = Annotated[float, Strict(), Field(allow_inf_nan=True)]
+
+
+@settings()
 class Parameter:
     """A model parameter: a linear coefficient (group ``"linear"``) or an element parameter.
 
@@ -87,64 +111,52 @@ class Parameter:
     known (the parameter must be determined by the test or reported as not determined).
     """
 
-    name: str
-    value: float
-    nominal: float
-    lower: float = -math.inf
-    upper: float = math.inf
-    calibrate: bool = False
-    scaling: str = "linear"
-    unit: str = ""
-    group: str = "linear"
-    description: str = ""
-    prior_rel_std: float | None = None
+    name: Text = declare("Name: letters, digits and '_', not 'rigid' or 'free'.")
+    value: Number = declare("Current value (in a truth file: the simulated reality).")
+    nominal: Number = declare("Value known before any test (the prior's centre).")
+    lower: Bound = declare("Lower bound of calibration (-inf: none).", -math.inf)
+    upper: Bound = declare("Upper bound of calibration (inf: none).", math.inf)
+    calibrate: Flag = declare("Whether calibration adjusts the parameter.", False)
+    scaling: Literal["linear", "log"] = declare("Scaling in calibration.", "linear")
+    unit: Text = declare("Unit, for people (SI).", "")
+    group: Literal["linear", "nonlinear"] = declare(
+        "A linear coefficient or a nonlinear element's parameter.", "linear"
+    )
+    description: Text = declare("What the parameter is, for people.", "")
+    prior_rel_std: Positive | None = declare(
+        "Prior standard deviation relative to nominal (none: no prior).", None
+    )
 
     def __post_init__(self) -> None:
         if not NAME_RE.match(self.name) or self.name in RESERVED:
-            raise ValueError(f"name: {self.name!r} is not a valid parameter name")
-        for f in ("value", "nominal", "lower", "upper"):
-            v = getattr(self, f)
-            if isinstance(v, bool) or not isinstance(v, int | float) or math.isnan(v):
-                raise ValueError(f"{f}: must be a number, got {v!r}")
-            object.__setattr__(self, f, float(v))
-        for f in ("value", "nominal"):
-            if not math.isfinite(getattr(self, f)):
-                raise ValueError(f"{f}: must be finite, got {getattr(self, f)!r}")
+            raise SettingError(("name",), f"{self.name!r} is not a valid parameter name")
+        for f in ("lower", "upper"):
+            if math.isnan(getattr(self, f)):
+                raise SettingError((f,), "must be a number, got nan")
         if not self.lower < self.upper:
-            raise ValueError(f"lower: {self.lower} must be below upper {self.upper}")
+            raise SettingError(("lower",), f"{self.lower} must be below upper {self.upper}")
         if not self.lower <= self.nominal <= self.upper:
-            raise ValueError(f"nominal: {self.nominal} is outside [{self.lower}, {self.upper}]")
-        if self.scaling not in ("linear", "log"):
-            raise ValueError(f"scaling: must be 'linear' or 'log', got {self.scaling!r}")
+            raise SettingError(
+                ("nominal",), f"{self.nominal} is outside [{self.lower}, {self.upper}]"
+            )
         if self.scaling == "log" and not (self.lower >= 0 and self.value > 0):
-            raise ValueError("scaling: 'log' needs lower >= 0 and a positive value")
-        if self.group not in ("linear", "nonlinear"):
-            raise ValueError(f"group: must be 'linear' or 'nonlinear', got {self.group!r}")
-        if not isinstance(self.calibrate, bool):
-            raise ValueError(f"calibrate: must be true or false, got {self.calibrate!r}")
-        prior = self.prior_rel_std
-        if prior is not None:
-            if isinstance(prior, bool) or not isinstance(prior, int | float):
-                raise ValueError(f"prior_rel_std: must be a number, got {prior!r}")
-            if not (math.isfinite(prior) and prior > 0):
-                raise ValueError(f"prior_rel_std: must be finite and > 0, got {prior!r}")
-            object.__setattr__(self, "prior_rel_std", float(prior))
+            raise SettingError(("scaling",), "'log' needs lower >= 0 and a positive value")
 
 
-@dataclass(frozen=True)
+@settings()
 class DofRef:
     """A DOF by measurement point (direction defaults to the point's) or by node and direction.
 
     A model fills in ``node`` and ``direction`` of point references on construction.
     """
 
-    node: str | None = None
-    direction: str | None = None
-    point: int | None = None
+    node: Text | None = declare("Node name.", None)
+    direction: Text | None = declare("Direction (the point's if a point is given).", None)
+    point: Integer | None = declare("Measurement point number.", None)
 
     def __post_init__(self) -> None:
         if self.point is None and (self.node is None or self.direction is None):
-            raise ValueError("give a point, or a node and a direction")
+            raise SettingError((), "give a point, or a node and a direction")
 
     @property
     def label(self) -> str:
@@ -152,32 +164,107 @@ class DofRef:
         return f"{self.node}/{self.direction}"
 
 
-@dataclass(frozen=True)
+Coordinate = Annotated[Number, Field(ge=-MAX_COORDINATE_M, le=MAX_COORDINATE_M)]
+
+
+@settings()
 class MeasurementPoint:
     """Measurement point ``number`` at ``node`` measuring ``direction``; ``xy`` in m."""
 
-    number: int
-    node: str
-    direction: str
-    xy: tuple[float, float] | None = None
+    number: Annotated[Integer, Field(ge=1)] = declare("Point number.")
+    node: Text = declare("Node (empty: the node at xy).")
+    direction: Text = declare("Direction measured.")
+    xy: tuple[Coordinate, Coordinate] | None = declare(
+        "Position [m], checked against the node.", None
+    )
 
 
-@dataclass(frozen=True)
+def _finite(value: Any, path: KeyPath = ()) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise SettingError(path, f"expected a number, got {value!r}")
+    if not math.isfinite(value):
+        raise SettingError(path, f"expected a finite number, got {value!r}")
+    return float(value)
+
+
+def _coefficient(value: Any) -> float | str:
+    return value if isinstance(value, str) else _finite(value)
+
+
+#: A number or the name of a model parameter.
+Coefficient = Annotated[float | str, PlainValidator(_coefficient)]
+
+
+@settings()
 class NonlinearSpec:
     """A nonlinear element: ``kind`` between DOF ``at`` and ``to`` (``None``: ground).
 
     ``params`` maps each element parameter to a number or a model parameter name.
     """
 
-    name: str
-    kind: str
-    at: DofRef
-    to: DofRef | None = None
-    params: dict[str, float | str] = field(default_factory=dict)
-    options: dict[str, Any] = field(default_factory=dict)
+    name: Text = declare("Element name, unique in the model.")
+    kind: Text = declare("Element kind (the element library's name).")
+    at: DofRef = declare("First DOF.")
+    to: DofRef | None = declare("Second DOF (none: ground).", None)
+    params: dict[str, Coefficient] = Field(
+        default_factory=dict, description="Element parameters: numbers or parameter names."
+    )
+    options: dict[str, Any] = Field(default_factory=dict, description="Element options.")
 
 
-@dataclass(frozen=True)
+def _mode_number(value: Any) -> int:
+    if isinstance(value, str) and value.isascii() and value.isdigit():
+        value = int(value)  # a table key in the file
+    elif isinstance(value, numbers.Integral) and not isinstance(value, bool):
+        value = int(value)  # a mode number computed with numpy
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise SettingError((), f"mode numbers start at 1, got {value!r}")
+    return value
+
+
+def _rayleigh(value: Any) -> tuple[float, float]:
+    if isinstance(value, Mapping):  # the file's {alpha = ..., beta = ...}
+        if unknown := sorted(set(value) - {"alpha", "beta"}):
+            raise SettingError((unknown[0],), "unknown key; expected alpha or beta")
+        named = [(k, value.get(k, 0.0)) for k in ("alpha", "beta")]
+    elif isinstance(value, list | tuple) and len(value) == 2:
+        named = list(zip(("alpha", "beta"), value, strict=True))
+    else:
+        raise SettingError((), f"expected a table of alpha and beta, got {value!r}")
+    for k, v in named:
+        if _finite(v, (k,)) < 0:
+            raise SettingError((k,), f"must be >= 0, got {v!r}")
+    return float(named[0][1]), float(named[1][1])
+
+
+def _matrix(value: Any) -> tuple[tuple[float, ...], ...] | str:
+    if isinstance(value, str):
+        if not value.endswith((".npy", ".mtx")):
+            raise SettingError((), f"a .npy or .mtx file, got {value!r}")
+        return value
+    if not isinstance(value, list | tuple):
+        raise SettingError((), f"expected an array of rows or a file name, got {value!r}")
+    rows = []
+    for i, row in enumerate(value):
+        if not isinstance(row, list | tuple):
+            raise SettingError((i,), f"expected an array, got {row!r}")
+        rows.append(tuple(_finite(v, (i, j)) for j, v in enumerate(row)))
+    if not rows or any(len(row) != len(rows) for row in rows):
+        raise SettingError((), "expected a square array of rows")
+    return tuple(rows)
+
+
+Zeta = Annotated[Number, Field(ge=0, lt=1)]
+ModeNumber = Annotated[int, PlainValidator(_mode_number)]
+Rayleigh = Annotated[
+    tuple[float, float],
+    PlainValidator(_rayleigh),
+    PlainSerializer(lambda ab: {"alpha": ab[0], "beta": ab[1]}),
+]
+DampingMatrix = Annotated[tuple[tuple[float, ...], ...] | str, PlainValidator(_matrix)]
+
+
+@settings()
 class DampingSpec:
     """Damping of the linear part: one of three forms.
 
@@ -191,34 +278,19 @@ class DampingSpec:
     solved directly from ``K - w^2 M + i w C``).
     """
 
-    default_zeta: float = 0.01
-    per_mode: dict[int, float] = field(default_factory=dict)
-    rayleigh: tuple[float, float] | None = None
-    matrix: tuple[tuple[float, ...], ...] | str | None = None
+    default_zeta: Zeta = declare("Damping ratio of the modes per_mode does not name.", 0.01)
+    per_mode: dict[ModeNumber, Zeta] = Field(
+        default_factory=dict, description="Damping ratio of mode n (1-based, by frequency)."
+    )
+    rayleigh: Rayleigh | None = declare("Rayleigh damping: alpha [1/s] and beta [s].", None)
+    matrix: DampingMatrix | None = declare(
+        "Viscous damping matrix [N s/m]: rows, or a .npy or .mtx file.", None
+    )
 
     def __post_init__(self) -> None:
-        if not 0 <= self.default_zeta < 1:
-            raise ValueError(f"default_zeta: must be in [0, 1), got {self.default_zeta!r}")
-        for mode, zeta in self.per_mode.items():
-            if not (isinstance(mode, int) and mode >= 1):
-                raise ValueError(f"per_mode: mode numbers start at 1, got {mode!r}")
-            if not 0 <= zeta < 1:
-                raise ValueError(f"per_mode.{mode}: must be in [0, 1), got {zeta!r}")
         object.__setattr__(self, "per_mode", dict(sorted(self.per_mode.items())))
-        if self.rayleigh is not None:
-            alpha, beta = (float(v) for v in self.rayleigh)
-            if not (alpha >= 0 and beta >= 0 and math.isfinite(alpha + beta)):
-                raise ValueError(
-                    f"rayleigh: alpha and beta must be finite and >= 0, got {self.rayleigh!r}"
-                )
-            object.__setattr__(self, "rayleigh", (alpha, beta))
         if self.rayleigh is not None and self.matrix is not None:
-            raise ValueError("rayleigh: give either rayleigh or matrix, not both")
-        if isinstance(self.matrix, list | tuple):
-            rows = tuple(tuple(float(v) for v in row) for row in self.matrix)
-            if not rows or any(len(row) != len(rows) for row in rows):
-                raise ValueError("matrix: expected a square array of rows")
-            object.__setattr__(self, "matrix", rows)
+            raise SettingError(("rayleigh",), "give either rayleigh or matrix, not both")
 
     @property
     def modal(self) -> bool:
@@ -242,330 +314,268 @@ class LinearPartSpec:
 
 
 class _Reader:
-    """Typed access to the parsed TOML with key-path errors."""
+    """Typed access to the parsed TOML with key-path errors (the frame's tables; the other
+    tables are read through their declared settings, :meth:`build`)."""
 
     def __init__(self, source: str) -> None:
         self.source = source
 
-    def fail(self, path: str, problem: str) -> None:
+    def fail(self, path: KeyPath, problem: str) -> NoReturn:
         raise ModelFileError(self.source, path, problem)
 
-    def table(self, value: Any, path: str, allowed: set[str] | None = None) -> dict:
+    def build(self, cls: type[T], data: Any, path: KeyPath) -> T:
+        """The declared settings ``cls`` read from ``data`` at ``path``."""
+        return build(cls, data, self.source, at=path, error=ModelFileError)
+
+    def table(self, value: Any, path: KeyPath, allowed: set[str] | None = None) -> dict:
         if not isinstance(value, dict):
             self.fail(path, f"expected a table, got {type(value).__name__}")
         if allowed is not None and (unknown := set(value) - allowed):
             self.fail(
-                f"{path}.{sorted(unknown)[0]}" if path else sorted(unknown)[0],
-                f"unknown key; expected one of {sorted(allowed)}",
+                (*path, sorted(unknown)[0]), f"unknown key; expected one of {sorted(allowed)}"
             )
         return value
 
-    def array(self, value: Any, path: str) -> list:
+    def array(self, value: Any, path: KeyPath) -> list:
         if not isinstance(value, list):
             self.fail(path, f"expected an array, got {type(value).__name__}")
         return value
 
-    def need(self, t: dict, key: str, path: str) -> Any:
+    def need(self, t: dict, key: str, path: KeyPath) -> Any:
         if key not in t:
-            self.fail(f"{path}.{key}", "missing")
+            self.fail((*path, key), "missing")
         return t[key]
 
-    def number(self, value: Any, path: str) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            self.fail(path, f"expected a number, got {value!r}")
-        return float(value)
+    def finite(self, value: Any, path: KeyPath) -> float:
+        try:
+            return _finite(value)
+        except SettingError as exc:
+            self.fail(path, exc.problem)
 
-    def finite(self, value: Any, path: str) -> float:
-        x = self.number(value, path)
-        if not math.isfinite(x):
-            self.fail(path, f"expected a finite number, got {value!r}")
-        return x
-
-    def coordinate(self, value: Any, path: str) -> float:
+    def coordinate(self, value: Any, path: KeyPath) -> float:
         x = self.finite(value, path)
         if abs(x) > MAX_COORDINATE_M:
             self.fail(path, f"a coordinate [m] within +-{MAX_COORDINATE_M:g}, got {value!r}")
         return x
 
-    def text(self, value: Any, path: str) -> str:
+    def text(self, value: Any, path: KeyPath) -> str:
         if not isinstance(value, str):
             self.fail(path, f"expected a string, got {value!r}")
         return value
 
-    def coef(self, value: Any, path: str) -> float | str:
+    def coef(self, value: Any, path: KeyPath) -> float | str:
         return value if isinstance(value, str) else self.finite(value, path)
 
-    def direction(self, value: Any, path: str, allowed: tuple[str, ...] = DIRECTIONS) -> str:
+    def direction(self, value: Any, path: KeyPath, allowed: tuple[str, ...] = DIRECTIONS) -> str:
         if value not in allowed:
             self.fail(path, f"bad direction {value!r}; expected one of {allowed}")
         return value
 
-    def build(self, cls: type, path: str, **kwargs: Any) -> Any:
-        """``cls(**kwargs)``; a ``"field: problem"`` error becomes ``"path.key: problem"``."""
+    def make(self, cls: type, path: KeyPath, **kwargs: Any) -> Any:
+        """``cls(**kwargs)`` of a frame record; its error is located at the field's file key
+        below ``path``."""
         try:
             return cls(**kwargs)
-        except ValueError as exc:
-            name, sep, problem = str(exc).partition(": ")
-            if sep and name.isidentifier():
-                self.fail(f"{path}.{_FILE_KEYS.get(name, name)}", problem)
-            self.fail(path, str(exc))
+        except SettingError as exc:
+            where = (_FILE_KEYS.get(p, p) if isinstance(p, str) else p for p in exc.path)
+            self.fail((*path, *where), exc.problem)
 
 
-def _section(r: _Reader, t: dict, path: str) -> Section:
+def _section(r: _Reader, t: dict, path: KeyPath) -> Section:
     r.table(t, path, {"shape", "b", "h", "outer", "wall", "A", "I"})
-    shape = r.text(t.get("shape", "general"), f"{path}.shape")
+    shape = r.text(t.get("shape", "general"), (*path, "shape"))
     keys = {"b": "b_m", "h": "h_m", "outer": "outer_m", "wall": "wall_m"}
     keys |= {"A": "area_m2", "I": "inertia_m4"}
-    kw = {keys[k]: r.finite(v, f"{path}.{k}") for k, v in t.items() if k != "shape"}
-    return r.build(Section, path, shape=shape, **kw)
+    kw = {keys[k]: r.finite(v, (*path, k)) for k, v in t.items() if k != "shape"}
+    return r.make(Section, path, shape=shape, **kw)
 
 
-def _member(r: _Reader, t: dict, path: str, i: int) -> Member:
+def _member(r: _Reader, t: dict, path: KeyPath, i: int) -> Member:
     allowed = {"name", "nodes", "section", "material", "elements", "max_element_length"}
     r.table(t, path, allowed | {"nsm", "group"})
-    nodes = r.array(r.need(t, "nodes", path), f"{path}.nodes")
+    nodes = r.array(r.need(t, "nodes", path), (*path, "nodes"))
     elements = t.get("elements")
     if elements is not None and (isinstance(elements, bool) or not isinstance(elements, int)):
-        r.fail(f"{path}.elements", f"expected an integer, got {elements!r}")
+        r.fail((*path, "elements"), f"expected an integer, got {elements!r}")
     max_len = t.get("max_element_length")
-    max_len = None if max_len is None else r.finite(max_len, f"{path}.max_element_length")
-    return r.build(
+    max_len = None if max_len is None else r.finite(max_len, (*path, "max_element_length"))
+    return r.make(
         Member,
         path,
-        name=r.text(t.get("name", f"m{i}"), f"{path}.name"),
-        nodes=tuple(r.text(n, f"{path}.nodes") for n in nodes),
-        section=r.text(r.need(t, "section", path), f"{path}.section"),
-        material=r.text(r.need(t, "material", path), f"{path}.material"),
+        name=r.text(t.get("name", f"m{i}"), (*path, "name")),
+        nodes=tuple(r.text(n, (*path, "nodes")) for n in nodes),
+        section=r.text(r.need(t, "section", path), (*path, "section")),
+        material=r.text(r.need(t, "material", path), (*path, "material")),
         elements=elements,
         max_element_length_m=max_len,
-        nsm_kg_per_m=r.coef(t.get("nsm", 0.0), f"{path}.nsm"),
-        group=r.text(t.get("group", "frame"), f"{path}.group"),
+        nsm_kg_per_m=r.coef(t.get("nsm", 0.0), (*path, "nsm")),
+        group=r.text(t.get("group", "frame"), (*path, "group")),
     )
 
 
-def _joint(r: _Reader, t: dict, path: str, i: int) -> Joint:
+def _joint(r: _Reader, t: dict, path: KeyPath, i: int) -> Joint:
     r.table(t, path, {"name", "nodes", *DIRECTIONS})
     conn = {}
     for d in DIRECTIONS:
         v = t.get(d, "rigid")
         if isinstance(v, dict):
-            v = r.need(r.table(v, f"{path}.{d}", {"k"}), "k", f"{path}.{d}")
-        conn[d] = r.coef(v, f"{path}.{d}")
-    nodes = r.array(r.need(t, "nodes", path), f"{path}.nodes")
+            v = r.need(r.table(v, (*path, d), {"k"}), "k", (*path, d))
+        conn[d] = r.coef(v, (*path, d))
+    nodes = r.array(r.need(t, "nodes", path), (*path, "nodes"))
     if len(nodes) != 2:
-        r.fail(f"{path}.nodes", f"need two nodes, got {nodes!r}")
-    name = r.text(t.get("name", f"joint{i}"), f"{path}.name")
-    return Joint(name=name, nodes=tuple(r.text(n, f"{path}.nodes") for n in nodes), **conn)
+        r.fail((*path, "nodes"), f"need two nodes, got {nodes!r}")
+    name = r.text(t.get("name", f"joint{i}"), (*path, "name"))
+    return Joint(name=name, nodes=tuple(r.text(n, (*path, "nodes")) for n in nodes), **conn)
+
+
+def _nodes(r: _Reader, doc: dict) -> dict[str, tuple[float, ...]]:
+    nodes = {}
+    for name, xy in r.table(doc.get("nodes", {}), ("nodes",)).items():
+        if not NODE_RE.match(name):
+            r.fail(("nodes", name), "node names use letters, digits, '_', '.', '-'")
+        xy = r.array(xy, ("nodes", name))
+        if len(xy) != 2:
+            r.fail(("nodes", name), f"expected [x, y] in m, got {xy!r}")
+        nodes[name] = tuple(r.coordinate(v, ("nodes", name, k)) for k, v in enumerate(xy))
+    return nodes
+
+
+def _rows(r: _Reader, doc: dict, key: str) -> list[tuple[KeyPath, dict]]:
+    """The tables of the array ``key`` with their key paths."""
+    rows = r.array(doc.get(key, []), (key,))
+    return [((key, i), r.table(t, (key, i))) for i, t in enumerate(rows)]
+
+
+def _spring(r: _Reader, t: dict, p: KeyPath, i: int) -> Spring:
+    r.table(t, p, {"name", "node", "direction", "k", "to"})
+    to = t.get("to")
+    return Spring(
+        name=r.text(t.get("name", f"spring{i}"), (*p, "name")),
+        node=r.text(r.need(t, "node", p), (*p, "node")),
+        direction=r.direction(r.need(t, "direction", p), (*p, "direction")),
+        k=r.coef(r.need(t, "k", p), (*p, "k")),
+        to=None if to is None else r.text(to, (*p, "to")),
+    )
+
+
+def _mass(r: _Reader, t: dict, p: KeyPath, i: int) -> LumpedMass:
+    r.table(t, p, {"name", "node", "m", "J", "group"})
+    return LumpedMass(
+        name=r.text(t.get("name", f"mass{i}"), (*p, "name")),
+        node=r.text(r.need(t, "node", p), (*p, "node")),
+        m_kg=r.coef(r.need(t, "m", p), (*p, "m")),
+        J_kgm2=r.coef(t.get("J", 0.0), (*p, "J")),
+        group=r.text(t.get("group", "lumped"), (*p, "group")),
+    )
 
 
 def _frame(r: _Reader, doc: dict) -> FrameSpec:
-    nodes = {}
-    for name, xy in r.table(doc.get("nodes", {}), "nodes").items():
-        if not NODE_RE.match(name):
-            r.fail(f"nodes.{name}", "node names use letters, digits, '_', '.', '-'")
-        xy = r.array(xy, f"nodes.{name}")
-        if len(xy) != 2:
-            r.fail(f"nodes.{name}", f"expected [x, y] in m, got {xy!r}")
-        nodes[name] = tuple(r.coordinate(v, f"nodes.{name}[{k}]") for k, v in enumerate(xy))
     sections = {
-        n: _section(r, r.table(t, f"sections.{n}"), f"sections.{n}")
-        for n, t in r.table(doc.get("sections", {}), "sections").items()
+        n: _section(r, r.table(t, ("sections", n)), ("sections", n))
+        for n, t in r.table(doc.get("sections", {}), ("sections",)).items()
     }
     materials = {}
-    for n, t in r.table(doc.get("materials", {}), "materials").items():
-        p = f"materials.{n}"
+    for n, t in r.table(doc.get("materials", {}), ("materials",)).items():
+        p = ("materials", n)
         r.table(t, p, {"E", "rho"})
-        E, rho = (r.coef(r.need(t, k, p), f"{p}.{k}") for k in ("E", "rho"))
+        E, rho = (r.coef(r.need(t, k, p), (*p, k)) for k in ("E", "rho"))
         materials[n] = Material(E=E, rho=rho)
-    members = tuple(
-        _member(r, r.table(t, f"members[{i}]"), f"members[{i}]", i)
-        for i, t in enumerate(r.array(doc.get("members", []), "members"))
-    )
-    joints = tuple(
-        _joint(r, r.table(t, f"joints[{i}]"), f"joints[{i}]", i)
-        for i, t in enumerate(r.array(doc.get("joints", []), "joints"))
-    )
-    springs = []
-    for i, t in enumerate(r.array(doc.get("springs", []), "springs")):
-        p = f"springs[{i}]"
-        r.table(t, p, {"name", "node", "direction", "k", "to"})
-        to = t.get("to")
-        springs.append(
-            Spring(
-                name=r.text(t.get("name", f"spring{i}"), f"{p}.name"),
-                node=r.text(r.need(t, "node", p), f"{p}.node"),
-                direction=r.direction(r.need(t, "direction", p), f"{p}.direction"),
-                k=r.coef(r.need(t, "k", p), f"{p}.k"),
-                to=None if to is None else r.text(to, f"{p}.to"),
-            )
-        )
-    masses = []
-    for i, t in enumerate(r.array(doc.get("masses", []), "masses")):
-        p = f"masses[{i}]"
-        r.table(t, p, {"name", "node", "m", "J", "group"})
-        masses.append(
-            LumpedMass(
-                name=r.text(t.get("name", f"mass{i}"), f"{p}.name"),
-                node=r.text(r.need(t, "node", p), f"{p}.node"),
-                m_kg=r.coef(r.need(t, "m", p), f"{p}.m"),
-                J_kgm2=r.coef(t.get("J", 0.0), f"{p}.J"),
-                group=r.text(t.get("group", "lumped"), f"{p}.group"),
-            )
-        )
     supports = {}
-    for node, dirs in r.table(doc.get("supports", {}), "supports").items():
-        dirs = list(DIRECTIONS) if dirs == "all" else r.array(dirs, f"supports.{node}")
-        supports[node] = tuple(r.direction(d, f"supports.{node}[{k}]") for k, d in enumerate(dirs))
+    for node, dirs in r.table(doc.get("supports", {}), ("supports",)).items():
+        dirs = list(DIRECTIONS) if dirs == "all" else r.array(dirs, ("supports", node))
+        supports[node] = tuple(r.direction(d, ("supports", node, k)) for k, d in enumerate(dirs))
     return FrameSpec(
-        nodes=nodes,
+        nodes=_nodes(r, doc),
         sections=sections,
         materials=materials,
-        members=members,
-        joints=joints,
-        springs=tuple(springs),
-        masses=tuple(masses),
+        members=tuple(_member(r, t, p, p[1]) for p, t in _rows(r, doc, "members")),
+        joints=tuple(_joint(r, t, p, p[1]) for p, t in _rows(r, doc, "joints")),
+        springs=tuple(_spring(r, t, p, p[1]) for p, t in _rows(r, doc, "springs")),
+        masses=tuple(_mass(r, t, p, p[1]) for p, t in _rows(r, doc, "masses")),
         supports=supports,
     )
 
 
 def _parameter(r: _Reader, name: str, t: dict, group: str | None) -> Parameter:
-    p = f"parameters.{name}"
-    keys = {"value", "nominal", "lower", "upper", "calibrate", "scaling", "unit", "group"}
-    r.table(t, p, keys | {"description", "prior_rel_std"})
+    """The file's shorthands: ``value`` and ``nominal`` default to each other, ``group`` to
+    the use of the parameter, ``lower`` to 0 under ``log`` scaling."""
+    p = ("parameters", name)
+    if "name" in t:
+        r.fail((*p, "name"), "unknown key (the table's name is the parameter's)")
     if "value" not in t and "nominal" not in t:
         r.fail(p, "give a value or a nominal value")
-    value = r.number(t.get("value", t.get("nominal")), f"{p}.value")
-    kw = {"value": value, "nominal": r.number(t.get("nominal", value), f"{p}.nominal")}
-    for k in ("lower", "upper"):
-        if k in t:
-            kw[k] = r.number(t[k], f"{p}.{k}")
-    for k in ("scaling", "unit", "group", "description"):
-        if k in t:
-            kw[k] = r.text(t[k], f"{p}.{k}")
-    if "prior_rel_std" in t:
-        kw["prior_rel_std"] = r.number(t["prior_rel_std"], f"{p}.prior_rel_std")
-    kw.setdefault("group", group or "linear")
-    if kw.get("scaling") == "log":
-        kw.setdefault("lower", 0.0)
-    return r.build(Parameter, p, name=name, calibrate=t.get("calibrate", False), **kw)
+    data = {"name": name, "group": group or "linear", **t}
+    data.setdefault("value", t.get("nominal"))
+    data.setdefault("nominal", t.get("value"))
+    if t.get("scaling") == "log":
+        data.setdefault("lower", 0.0)
+    return r.build(Parameter, data, p)
 
 
-def _dofref(r: _Reader, t: Any, path: str, directions: tuple[str, ...]) -> DofRef:
-    r.table(t, path, {"point", "node", "direction"})
-    point = t.get("point")
-    if point is not None and (isinstance(point, bool) or not isinstance(point, int)):
-        r.fail(f"{path}.point", f"expected a point number, got {point!r}")
-    direction = t.get("direction")
-    if direction is not None:
-        r.direction(direction, f"{path}.direction", directions)
-    node = None if "node" not in t else r.text(t["node"], f"{path}.node")
-    if point is not None and node is not None:
-        r.fail(path, "give either a point or a node, not both")
-    return r.build(DofRef, path, node=node, direction=direction, point=point)
-
-
-def _nonlinear(r: _Reader, t: dict, path: str, dirs: tuple[str, ...]) -> NonlinearSpec:
-    r.table(t, path, {"name", "kind", "at", "to", "params", "options"})
-    params = r.table(t.get("params", {}), f"{path}.params")
-    return NonlinearSpec(
-        name=r.text(r.need(t, "name", path), f"{path}.name"),
-        kind=r.text(r.need(t, "kind", path), f"{path}.kind"),
-        at=_dofref(r, r.need(t, "at", path), f"{path}.at", dirs),
-        to=None if "to" not in t else _dofref(r, t["to"], f"{path}.to", dirs),
-        params={k: r.coef(v, f"{path}.params.{k}") for k, v in params.items()},
-        options=dict(r.table(t.get("options", {}), f"{path}.options")),
-    )
+def _nonlinear(r: _Reader, t: dict, path: KeyPath, dirs: tuple[str, ...]) -> NonlinearSpec:
+    spec = r.build(NonlinearSpec, t, path)
+    for key, ref in (("at", spec.at), ("to", spec.to)):
+        if ref is None:
+            continue
+        if ref.direction is not None:
+            r.direction(ref.direction, (*path, key, "direction"), dirs)
+        if ref.point is not None and ref.node is not None:
+            r.fail((*path, key), "give either a point or a node, not both")
+    return spec
 
 
 def _points(r: _Reader, doc: dict, dirs: tuple[str, ...]) -> dict[int, MeasurementPoint]:
     points = {}
-    for key, t in r.table(doc.get("points", {}), "points").items():
-        p = f"points.{key}"
+    for key, t in r.table(doc.get("points", {}), ("points",)).items():
+        p = ("points", key)
         if not (key.isascii() and key.isdigit()) or int(key) < 1:
             r.fail(p, "point numbers are positive integers")
-        r.table(t, p, {"node", "direction", "xy"})
-        xy = t.get("xy")
-        if xy is not None:
-            xy = r.array(xy, f"{p}.xy")
-            if len(xy) != 2:
-                r.fail(f"{p}.xy", f"expected [x, y] in m, got {xy!r}")
-            xy = tuple(r.coordinate(v, f"{p}.xy[{k}]") for k, v in enumerate(xy))
-        if "node" not in t and xy is None:
+        if "node" not in r.table(t, p) and t.get("xy") is None:
             r.fail(p, "give a node or xy")
-        node = r.text(t.get("node", ""), f"{p}.node")
-        direction = r.direction(r.need(t, "direction", p), f"{p}.direction", dirs)
-        points[int(key)] = MeasurementPoint(int(key), node, direction, xy)
+        if "number" in t:
+            r.fail((*p, "number"), "unknown key (the table's name is the point's number)")
+        point = r.build(MeasurementPoint, {"node": "", **t, "number": int(key)}, p)
+        r.direction(point.direction, (*p, "direction"), dirs)
+        points[point.number] = point
     return dict(sorted(points.items()))
 
 
 def _linear_part(r: _Reader, t: dict, base: Path) -> LinearPartSpec:
-    r.table(t, "linear_part", {"format", "file", "files", "dof_map", "masses"})
-    fmt = r.text(r.need(t, "format", "linear_part"), "linear_part.format")
+    p: KeyPath = ("linear_part",)
+    r.table(t, p, {"format", "file", "files", "dof_map", "masses"})
+    fmt = r.text(r.need(t, "format", p), (*p, "format"))
     if fmt not in FORMATS:
-        r.fail("linear_part.format", f"unknown format {fmt!r}; expected one of {FORMATS}")
+        r.fail((*p, "format"), f"unknown format {fmt!r}; expected one of {FORMATS}")
     if fmt == "mtx":
-        files = r.table(r.need(t, "files", "linear_part"), "linear_part.files", {"M", "K", "C"})
+        files = r.table(r.need(t, "files", p), (*p, "files"), {"M", "K", "C"})
         for k in ("M", "K"):
-            r.need(files, k, "linear_part.files")
+            r.need(files, k, (*p, "files"))
     else:
-        files = {"file": r.need(t, "file", "linear_part")}
-    files = {k: str((base / r.text(v, f"linear_part.{k}")).resolve()) for k, v in files.items()}
+        files = {"file": r.need(t, "file", p)}
+    files = {k: str((base / r.text(v, (*p, k))).resolve()) for k, v in files.items()}
     dof_map = t.get("dof_map")
     if isinstance(dof_map, str):
         dof_map = str((base / dof_map).resolve())
     elif dof_map is not None:
-        dof_map = tuple(
-            r.text(s, "linear_part.dof_map") for s in r.array(dof_map, "linear_part.dof_map")
-        )
+        dof_map = tuple(r.text(s, (*p, "dof_map")) for s in r.array(dof_map, (*p, "dof_map")))
     elif fmt == "mtx":
-        r.fail("linear_part.dof_map", "missing (a file name or a list of 'node/direction')")
-    masses = r.table(t.get("masses", {}), "linear_part.masses")
-    masses = {n: r.finite(m, f"linear_part.masses.{n}") for n, m in masses.items()}
+        r.fail((*p, "dof_map"), "missing (a file name or a list of 'node/direction')")
+    masses = r.table(t.get("masses", {}), (*p, "masses"))
+    masses = {n: r.finite(m, (*p, "masses", n)) for n, m in masses.items()}
     return LinearPartSpec(format=fmt, files=files, dof_map=dof_map, masses=masses)
 
 
 def _damping(r: _Reader, t: dict, base: Path) -> DampingSpec:
-    r.table(t, "damping", {"default_zeta", "per_mode", "rayleigh", "matrix"})
-    per_mode = r.table(t.get("per_mode", {}), "damping.per_mode")
-    for k in per_mode:
-        if not (k.isascii() and k.isdigit()):
-            r.fail(f"damping.per_mode.{k}", "mode numbers are positive integers")
     if ("rayleigh" in t or "matrix" in t) and (modal := [k for k in t if k in DAMPING_MODAL]):
         other = "rayleigh" if "rayleigh" in t else "matrix"
         r.fail(
-            f"damping.{modal[0]}", f"modal damping ratios and damping.{other} exclude each other"
+            ("damping", modal[0]), f"modal damping ratios and damping.{other} exclude each other"
         )
-    rayleigh = None
-    if "rayleigh" in t:
-        ray = r.table(t["rayleigh"], "damping.rayleigh", {"alpha", "beta"})
-        rayleigh = tuple(
-            r.finite(ray.get(k, 0.0), f"damping.rayleigh.{k}") for k in ("alpha", "beta")
-        )
-        for k, v in zip(("alpha", "beta"), rayleigh, strict=True):
-            if v < 0:
-                r.fail(f"damping.rayleigh.{k}", f"must be >= 0, got {v!r}")
-    matrix = t.get("matrix")
-    if isinstance(matrix, str):
-        if not matrix.endswith((".npy", ".mtx")):
-            r.fail("damping.matrix", f"a .npy or .mtx file, got {matrix!r}")
-        matrix = str((base / matrix).resolve())
-    elif matrix is not None:
-        rows = r.array(matrix, "damping.matrix")
-        matrix = tuple(
-            tuple(
-                r.finite(v, f"damping.matrix[{i}][{j}]")
-                for j, v in enumerate(r.array(row, f"damping.matrix[{i}]"))
-            )
-            for i, row in enumerate(rows)
-        )
-    return r.build(
-        DampingSpec,
-        "damping",
-        default_zeta=r.finite(t.get("default_zeta", 0.01), "damping.default_zeta"),
-        per_mode={int(k): r.finite(v, f"damping.per_mode.{k}") for k, v in per_mode.items()},
-        rayleigh=rayleigh,
-        matrix=matrix,
-    )
+    data = dict(t)
+    matrix = data.get("matrix")
+    if isinstance(matrix, str) and matrix.endswith((".npy", ".mtx")):
+        data["matrix"] = str((base / matrix).resolve())
+    return r.build(DampingSpec, data, ("damping",))
 
 
 def _groups(doc: dict) -> dict[str, str]:
@@ -598,41 +608,38 @@ def parse_document(doc: dict, source: str, *, allow_truth: bool = False) -> dict
     ModelFileError
     """
     r = _Reader(source)
-    r.table(doc, "", _TOP_KEYS)
+    r.table(doc, (), _TOP_KEYS)
     if "truth" in doc and not allow_truth:
         r.fail(
-            "truth",
+            ("truth",),
             "this model file holds the simulated truth; only the simulator may "
             "load it (load_model(..., allow_truth=True))",
         )
     linear = "linear_part" in doc
     if linear and (frame_keys := [k for k in (*_FRAME_KEYS, "supports") if k in doc]):
-        r.fail(frame_keys[0], "a model with [linear_part] cannot also define a frame")
+        r.fail((frame_keys[0],), "a model with [linear_part] cannot also define a frame")
     if not linear and "members" not in doc:
-        r.fail("members", "missing (or give a [linear_part])")
+        r.fail(("members",), "missing (or give a [linear_part])")
     base = Path(source).parent if source != "<string>" else Path.cwd()
     dirs = IMPORT_DIRECTIONS if linear else DIRECTIONS
     groups = _groups(doc)
     parameters = {
-        n: _parameter(r, n, r.table(t, f"parameters.{n}"), groups.get(n))
-        for n, t in r.table(doc.get("parameters", {}), "parameters").items()
+        n: _parameter(r, n, r.table(t, ("parameters", n)), groups.get(n))
+        for n, t in r.table(doc.get("parameters", {}), ("parameters",)).items()
     }
-    damping = _damping(r, r.table(doc.get("damping", {}), "damping"), base)
-    nonlinear = tuple(
-        _nonlinear(r, r.table(t, f"nonlinear[{i}]"), f"nonlinear[{i}]", dirs)
-        for i, t in enumerate(r.array(doc.get("nonlinear", []), "nonlinear"))
-    )
+    damping = _damping(r, r.table(doc.get("damping", {}), ("damping",)), base)
+    nonlinear = tuple(_nonlinear(r, t, p, dirs) for p, t in _rows(r, doc, "nonlinear"))
     return {
-        "title": r.text(doc.get("title", ""), "title"),
+        "title": r.text(doc.get("title", ""), ("title",)),
         "parameters": parameters,
         "frame": None if linear else _frame(r, doc),
-        "linear_part": _linear_part(r, r.table(doc["linear_part"], "linear_part"), base)
+        "linear_part": _linear_part(r, r.table(doc["linear_part"], ("linear_part",)), base)
         if linear
         else None,
         "points": _points(r, doc, dirs),
         "nonlinear": nonlinear,
         "damping": damping,
-        "truth": r.table(doc["truth"], "truth") if "truth" in doc else None,
+        "truth": r.table(doc["truth"], ("truth",)) if "truth" in doc else None,
         "source": source,
     }
 

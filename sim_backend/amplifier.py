@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis.settings import NonNegative, Number, Positive, SettingError, declare, settings
+
 __all__ = ["AmplifierConstants", "AmplifierModel", "AmplifierState", "OverloadLatchedError"]
 
 logger = logging.getLogger(__name__)
@@ -29,15 +31,6 @@ class OverloadLatchedError(RuntimeError):
     """The output cannot be switched on while the overload latch is set."""
 
 
-def _finite(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
-        raise TypeError(f"AmplifierConstants.{name}: expected a number, got {value!r}")
-    x = float(value)
-    if not math.isfinite(x):
-        raise ValueError(f"AmplifierConstants.{name}: must be finite, got {value!r}")
-    return x
-
-
 def _frequencies(frequency_hz: float | np.ndarray) -> np.ndarray:
     f = np.asarray(frequency_hz, dtype=float)
     if not np.all(np.isfinite(f)) or np.any(f < 0):
@@ -45,67 +38,46 @@ def _frequencies(frequency_hz: float | np.ndarray) -> np.ndarray:
     return f
 
 
-@dataclass(frozen=True)
+@settings()
 class AmplifierConstants:
     """Fixed properties of one amplifier.
 
-    Parameters
-    ----------
-    gain_v_per_v : float
-        Low-frequency voltage gain at power-on and after reset [V/V].
-    bandwidth_hz : float
-        -3 dB corner of the first-order low-pass gain [Hz], > 0.
-    current_limit_a : float
-        Peak output current above which the overload protection trips [A], > 0.
-    output_resistance_ohm : float
-        Source resistance in series with the output [ohm], >= 0.
-    gain_min_v_per_v, gain_max_v_per_v : float
-        Settable gain range [V/V]; ``0 <= min < max`` and the power-on gain within it.
-    ambient_temperature_c : float
-        Heat-sink temperature with no output current [degC].
-    heating_c_per_a2 : float
-        Steady heat-sink temperature rise per mean-square output current [degC/A^2], >= 0;
-        a sinusoidal peak current ``I`` heats by ``heating_c_per_a2 * I**2 / 2``.
+    The settable gain range is ``0 <= gain_min_v_per_v < gain_max_v_per_v`` with the power-on
+    gain within it. A sinusoidal peak current ``I`` heats the heat sink by
+    ``heating_c_per_a2 * I**2 / 2``.
     """
 
-    gain_v_per_v: float = 10.0
-    bandwidth_hz: float = 20_000.0
-    current_limit_a: float = 5.0
-    output_resistance_ohm: float = 0.05
-    gain_min_v_per_v: float = 0.0
-    gain_max_v_per_v: float = 20.0
-    ambient_temperature_c: float = 25.0
-    heating_c_per_a2: float = 1.5
+    gain_v_per_v: Number = declare(
+        "Low-frequency voltage gain at power-on and after reset [V/V].", 10.0
+    )
+    bandwidth_hz: Positive = declare(
+        "-3 dB corner of the first-order low-pass gain [Hz].", 20_000.0
+    )
+    current_limit_a: Positive = declare(
+        "Peak output current above which the overload protection trips [A].", 5.0
+    )
+    output_resistance_ohm: NonNegative = declare(
+        "Source resistance in series with the output [ohm].", 0.05
+    )
+    gain_min_v_per_v: Number = declare("Lowest settable gain [V/V].", 0.0)
+    gain_max_v_per_v: Number = declare("Highest settable gain [V/V].", 20.0)
+    ambient_temperature_c: Number = declare(
+        "Heat-sink temperature with no output current [degC].", 25.0
+    )
+    heating_c_per_a2: NonNegative = declare(
+        "Steady heat-sink temperature rise per mean-square output current [degC/A^2].", 1.5
+    )
 
     def __post_init__(self) -> None:
-        values = {name: _finite(name, getattr(self, name)) for name in self.__dataclass_fields__}
-        if values["bandwidth_hz"] <= 0:
-            raise ValueError(
-                f"AmplifierConstants.bandwidth_hz: must be > 0, got {self.bandwidth_hz}"
-            )
-        if values["current_limit_a"] <= 0:
-            raise ValueError(
-                f"AmplifierConstants.current_limit_a: must be > 0, got {self.current_limit_a}"
-            )
-        if values["output_resistance_ohm"] < 0:
-            raise ValueError(
-                "AmplifierConstants.output_resistance_ohm: must be >= 0, "
-                f"got {self.output_resistance_ohm}"
-            )
-        if values["heating_c_per_a2"] < 0:
-            raise ValueError(
-                f"AmplifierConstants.heating_c_per_a2: must be >= 0, got {self.heating_c_per_a2}"
-            )
-        low, high = values["gain_min_v_per_v"], values["gain_max_v_per_v"]
+        low, high = self.gain_min_v_per_v, self.gain_max_v_per_v
         if not 0 <= low < high:
-            raise ValueError(
-                "AmplifierConstants.gain_min_v_per_v/gain_max_v_per_v: need 0 <= min < max, "
-                f"got [{low}, {high}]"
+            raise SettingError(
+                ("gain_min_v_per_v",), f"need 0 <= min < max gain, got [{low}, {high}]"
             )
-        if not low <= values["gain_v_per_v"] <= high:
-            raise ValueError(
-                f"AmplifierConstants.gain_v_per_v: {self.gain_v_per_v} is outside the settable "
-                f"range [{low}, {high}]"
+        if not low <= self.gain_v_per_v <= high:
+            raise SettingError(
+                ("gain_v_per_v",),
+                f"{self.gain_v_per_v} is outside the settable range [{low}, {high}]",
             )
 
 

@@ -27,59 +27,35 @@ Press 2000, sec. 3.4 (shaker-structure interaction, force drop-out at resonance)
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
+
+from analysis.settings import NonNegative, Positive, declare, settings
 
 __all__ = ["ShakerConstants", "ShakerTerms", "shaker_terms"]
 
 
-@dataclass(frozen=True)
+@settings()
 class ShakerConstants:
     """Mechanical and electrical constants of a modal shaker and its stinger.
 
     Defaults describe a small modal shaker of the 2025E class on a steel stinger.
-
-    Parameters
-    ----------
-    armature_mass_kg : float
-        Moving mass of armature and coil [kg], > 0.
-    suspension_stiffness_n_per_m : float
-        Flexure suspension stiffness [N/m], >= 0.
-    suspension_damping_ns_per_m : float
-        Mechanical damping of the suspension [N s/m], >= 0.
-    coil_resistance_ohm : float
-        DC resistance of the coil [ohm], > 0.
-    coil_inductance_h : float
-        Coil inductance [H], > 0.
-    force_constant_n_per_a : float
-        Force constant ``Bl`` [N/A] (equal to the back-EMF constant in V s/m), > 0.
-    stinger_stiffness_n_per_m : float
-        Axial stiffness of the stinger [N/m], > 0.
     """
 
-    armature_mass_kg: float = 0.2
-    suspension_stiffness_n_per_m: float = 2000.0
-    suspension_damping_ns_per_m: float = 2.0
-    coil_resistance_ohm: float = 1.5
-    coil_inductance_h: float = 3.0e-4
-    force_constant_n_per_a: float = 15.0
-    stinger_stiffness_n_per_m: float = 5.0e6
-
-    def __post_init__(self) -> None:
-        nonnegative = {"suspension_stiffness_n_per_m", "suspension_damping_ns_per_m"}
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise TypeError(f"ShakerConstants.{f.name}: expected a number, got {value!r}")
-            value = float(value)
-            if not math.isfinite(value) or value < 0 or (value == 0 and f.name not in nonnegative):
-                bound = ">= 0" if f.name in nonnegative else "> 0"
-                raise ValueError(
-                    f"ShakerConstants.{f.name}: must be finite and {bound}, got {value}"
-                )
-            object.__setattr__(self, f.name, value)
+    armature_mass_kg: Positive = declare("Moving mass of armature and coil [kg].", 0.2)
+    suspension_stiffness_n_per_m: NonNegative = declare(
+        "Flexure suspension stiffness [N/m].", 2000.0
+    )
+    suspension_damping_ns_per_m: NonNegative = declare(
+        "Mechanical damping of the suspension [N s/m].", 2.0
+    )
+    coil_resistance_ohm: Positive = declare("DC resistance of the coil [ohm].", 1.5)
+    coil_inductance_h: Positive = declare("Coil inductance [H].", 3.0e-4)
+    force_constant_n_per_a: Positive = declare(
+        "Force constant Bl [N/A] (equal to the back-EMF constant in V s/m).", 15.0
+    )
+    stinger_stiffness_n_per_m: Positive = declare("Axial stiffness of the stinger [N/m].", 5.0e6)
 
 
 @dataclass(frozen=True)

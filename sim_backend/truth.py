@@ -31,70 +31,41 @@ from __future__ import annotations
 
 import functools
 import logging
-import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+
+from pydantic import Field
 
 from analysis.model import Model, load_model
+from analysis.settings import ConfigError, Integer, NonNegative, Text, build, declare, settings
 from sim_backend.amplifier import AmplifierConstants
 from sim_backend.shaker import ShakerConstants
 
-__all__ = ["NoiseFloors", "SensorDefaults", "Truth", "TRUTH_DIR", "list_truths", "load_truth"]
+__all__ = [
+    "NoiseFloors",
+    "SensorDefaults",
+    "Truth",
+    "TruthTable",
+    "TRUTH_DIR",
+    "list_truths",
+    "load_truth",
+]
 
 logger = logging.getLogger(__name__)
 
 TRUTH_DIR = Path(__file__).parent / "truths"
-_TRUTH_KEYS = {
-    "description",
-    "hidden_effect",
-    "seed",
-    "drive_point",
-    "noise",
-    "shaker",
-    "amplifier",
-    "sensors",
-}
 
 
-def _positive_fields(obj: object, owner: str, allow_zero: bool) -> None:
-    for f in fields(obj):  # type: ignore[arg-type]
-        value = getattr(obj, f.name)
-        if f.type in ("int", int):
-            continue
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise TypeError(f"{owner}.{f.name}: expected a number, got {value!r}")
-        ok = math.isfinite(value) and (value >= 0 if allow_zero else value > 0)
-        if not ok:
-            raise ValueError(
-                f"{owner}.{f.name}: must be finite and {'>= 0' if allow_zero else '> 0'}, "
-                f"got {value!r}"
-            )
-        object.__setattr__(obj, f.name, float(value))
-
-
-@dataclass(frozen=True)
+@settings()
 class NoiseFloors:
     """White measurement noise of each quantity as an amplitude spectral density.
 
     A channel sampled at ``fs`` gets a per-sample standard deviation ``asd * sqrt(fs / 2)``.
-
-    Parameters
-    ----------
-    force_n_per_rthz : float
-        Force channels [N/sqrt(Hz)], >= 0.
-    acceleration_ms2_per_rthz : float
-        Acceleration channels [m/s^2/sqrt(Hz)], >= 0.
-    voltage_v_per_rthz : float
-        Voltage channels [V/sqrt(Hz)], >= 0.
     """
 
-    force_n_per_rthz: float = 0.0
-    acceleration_ms2_per_rthz: float = 0.0
-    voltage_v_per_rthz: float = 0.0
-
-    def __post_init__(self) -> None:
-        _positive_fields(self, "NoiseFloors", allow_zero=True)
+    force_n_per_rthz: NonNegative = declare("Force channels [N/sqrt(Hz)].", 0.0)
+    acceleration_ms2_per_rthz: NonNegative = declare("Acceleration channels [m/s^2/sqrt(Hz)].", 0.0)
+    voltage_v_per_rthz: NonNegative = declare("Voltage channels [V/sqrt(Hz)].", 0.0)
 
     def for_quantity(self, quantity: str) -> float:
         """Amplitude spectral density of ``quantity`` ("force", "acceleration", "voltage")."""
@@ -105,30 +76,37 @@ class NoiseFloors:
         }[quantity]
 
 
-@dataclass(frozen=True)
+@settings()
 class SensorDefaults:
-    """Sensor masses and converter resolution used unless a channel says otherwise.
+    """Sensor masses and converter resolution used unless a channel says otherwise."""
 
-    Parameters
-    ----------
-    accelerometer_mass_kg : float
-        Mass of one accelerometer with its cable end [kg] (a PCB 352A56 class sensor).
-    impedance_head_mass_kg : float
-        Mass of the impedance head below its force gauge, added at the drive point [kg].
-    adc_bits : int
-        Resolution of the input converters over each channel's range.
-    """
+    accelerometer_mass_kg: NonNegative = declare(
+        "Mass of one accelerometer with its cable end [kg] (a PCB 352A56 class sensor).", 0.0055
+    )
+    impedance_head_mass_kg: NonNegative = declare(
+        "Mass of the impedance head below its force gauge, added at the drive point [kg].", 0.01
+    )
+    adc_bits: Integer = declare(
+        "Resolution of the input converters over each channel's range [bits].", 16, ge=8, le=32
+    )
 
-    accelerometer_mass_kg: float = 0.0055
-    impedance_head_mass_kg: float = 0.01
-    adc_bits: int = 16
 
-    def __post_init__(self) -> None:
-        _positive_fields(self, "SensorDefaults", allow_zero=True)
-        if isinstance(self.adc_bits, bool) or not isinstance(self.adc_bits, int):
-            raise TypeError(f"SensorDefaults.adc_bits: expected an int, got {self.adc_bits!r}")
-        if not 8 <= self.adc_bits <= 32:
-            raise ValueError(f"SensorDefaults.adc_bits: must be in [8, 32], got {self.adc_bits}")
+@settings(kw_only=True)
+class TruthTable:
+    """The ``[truth]`` table of a truth file: what only the simulator reads."""
+
+    description: Text = declare("What is hidden, for people.", "")
+    hidden_effect: Text = declare("Short tag of the hidden effect.", "none")
+    seed: Integer = declare("Default noise seed.", 0, ge=0)
+    drive_point: Integer = declare(
+        "Drive point used when no force channel names the drive point.", 3
+    )
+    noise: NoiseFloors = Field(default_factory=NoiseFloors, description="Noise floors.")
+    shaker: ShakerConstants = Field(default_factory=ShakerConstants, description="The shaker.")
+    amplifier: AmplifierConstants = Field(
+        default_factory=AmplifierConstants, description="The power amplifier."
+    )
+    sensors: SensorDefaults = Field(default_factory=SensorDefaults, description="The sensors.")
 
 
 @dataclass(frozen=True)
@@ -170,20 +148,6 @@ def list_truths() -> list[str]:
     return sorted(p.stem for p in TRUTH_DIR.glob("*.toml"))
 
 
-def _table(raw: dict, key: str, source: str) -> dict[str, Any]:
-    value = raw.get(key, {})
-    if not isinstance(value, dict):
-        raise ValueError(f"{source}: truth.{key}: expected a table, got {value!r}")
-    return value
-
-
-def _build(cls: type, raw: dict, key: str, source: str) -> Any:
-    try:
-        return cls(**_table(raw, key, source))
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{source}: truth.{key}: {exc}") from None
-
-
 def load_truth(name_or_path: str | Path = "reference") -> Truth:
     """Load a truth structure by name (see :func:`list_truths`) or from a path.
 
@@ -200,7 +164,8 @@ def load_truth(name_or_path: str | Path = "reference") -> Truth:
     ------
     ValueError
         If the name is unknown (the message lists the shipped ones), the file has no
-        ``[truth]`` table, or a value in it is invalid (the message names the key).
+        ``[truth]`` table, or a value in it is invalid (a :class:`~analysis.settings.ConfigError`
+        naming the file and the key path, e.g. ``truth.noise.force_n_per_rthz``).
     """
     path = Path(name_or_path)
     if not path.suffix and not path.exists():
@@ -220,29 +185,22 @@ def _load(path: Path, mtime_ns: int) -> Truth:
 
     model = load_model(path, allow_truth=True)
     source = str(path)
-    raw = model.truth
-    if raw is None:
+    if model.truth is None:
         raise ValueError(f"{source}: no [truth] table: this is an analysis model, not a truth")
-    unknown = set(raw) - _TRUTH_KEYS
-    if unknown:
-        raise ValueError(f"{source}: truth: unknown key(s) {sorted(unknown)}")
-    drive_point = raw.get("drive_point", 3)
-    if drive_point not in model.points:
-        raise ValueError(f"{source}: truth.drive_point: {drive_point!r} is not a point")
-    seed = raw.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"{source}: truth.seed: expected an integer >= 0, got {seed!r}")
+    table = build(TruthTable, model.truth, source, at=("truth",))
+    if table.drive_point not in model.points:
+        raise ConfigError(source, ("truth", "drive_point"), f"{table.drive_point!r} is not a point")
     truth = Truth(
         name=path.stem if path.parent == TRUTH_DIR.resolve() else source,
         model=model,
-        description=str(raw.get("description", "")),
-        hidden_effect=str(raw.get("hidden_effect", "none")),
-        seed=seed,
-        drive_point=int(drive_point),
-        noise=_build(NoiseFloors, raw, "noise", source),
-        shaker=_build(ShakerConstants, raw, "shaker", source),
-        amplifier=_build(AmplifierConstants, raw, "amplifier", source),
-        sensors=_build(SensorDefaults, raw, "sensors", source),
+        description=table.description,
+        hidden_effect=table.hidden_effect,
+        seed=table.seed,
+        drive_point=table.drive_point,
+        noise=table.noise,
+        shaker=table.shaker,
+        amplifier=table.amplifier,
+        sensors=table.sensors,
     )
     logger.debug("loaded truth %s (%s)", truth.name, truth.hidden_effect)
     return truth

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..settings import KeyPath, SettingError, dotted
 from .beam import Section, mass_matrix, stiffness_matrix
 
 __all__ = [
@@ -50,10 +51,10 @@ Dof = tuple[str, str]
 class SpecError(ValueError):
     """A problem in a structure description, located by the key path of the model file."""
 
-    def __init__(self, path: str, problem: str) -> None:
-        self.path = path
+    def __init__(self, path: KeyPath, problem: str) -> None:
+        self.path = tuple(path)
         self.problem = problem
-        super().__init__(f"{path}: {problem}")
+        super().__init__(f"{dotted(self.path)}: {problem}" if self.path else problem)
 
 
 @dataclass(frozen=True)
@@ -80,16 +81,16 @@ class Member:
 
     def __post_init__(self) -> None:
         if len(self.nodes) != 2 or self.nodes[0] == self.nodes[1]:
-            raise ValueError(f"nodes: need two different nodes, got {self.nodes!r}")
+            raise SettingError(("nodes",), f"need two different nodes, got {self.nodes!r}")
         if (self.elements is None) == (self.max_element_length_m is None):
-            raise ValueError("give exactly one of 'elements' and 'max_element_length'")
+            raise SettingError((), "give exactly one of 'elements' and 'max_element_length'")
         if self.elements is not None and not (
             isinstance(self.elements, int) and self.elements >= 1
         ):
-            raise ValueError(f"elements: must be a positive integer, got {self.elements!r}")
+            raise SettingError(("elements",), f"must be a positive integer, got {self.elements!r}")
         if self.max_element_length_m is not None and not self.max_element_length_m > 0:
-            raise ValueError(
-                f"max_element_length: must be positive, got {self.max_element_length_m!r}"
+            raise SettingError(
+                ("max_element_length_m",), f"must be positive, got {self.max_element_length_m!r}"
             )
 
 
@@ -143,75 +144,75 @@ class FrameSpec:
     masses: tuple[LumpedMass, ...] = ()
     supports: dict[str, tuple[str, ...]] = field(default_factory=dict)
 
-    def coefficient_uses(self) -> list[tuple[str, Coefficient, bool]]:
+    def coefficient_uses(self) -> list[tuple[KeyPath, Coefficient, bool]]:
         """``(key path, coefficient, strictly positive?)`` for every linear coefficient."""
-        uses: list[tuple[str, Coefficient, bool]] = []
+        uses: list[tuple[KeyPath, Coefficient, bool]] = []
         for name, mat in self.materials.items():
             uses += [
-                (f"materials.{name}.E", mat.E, True),
-                (f"materials.{name}.rho", mat.rho, False),
+                (("materials", name, "E"), mat.E, True),
+                (("materials", name, "rho"), mat.rho, False),
             ]
-        uses += [(f"members[{i}].nsm", m.nsm_kg_per_m, False) for i, m in enumerate(self.members)]
-        uses += [(f"springs[{i}].k", s.k, False) for i, s in enumerate(self.springs)]
+        uses += [(("members", i, "nsm"), m.nsm_kg_per_m, False) for i, m in enumerate(self.members)]
+        uses += [(("springs", i, "k"), s.k, False) for i, s in enumerate(self.springs)]
         for i, j in enumerate(self.joints):
             for d in DIRECTIONS:
                 if j.connection(d) not in JOINT_CONNECTIONS:
-                    uses.append((f"joints[{i}].{d}", j.connection(d), False))
+                    uses.append((("joints", i, d), j.connection(d), False))
         for i, m in enumerate(self.masses):
-            uses += [(f"masses[{i}].m", m.m_kg, False), (f"masses[{i}].J", m.J_kgm2, False)]
+            uses += [(("masses", i, "m"), m.m_kg, False), (("masses", i, "J"), m.J_kgm2, False)]
         return uses
 
     def check(self) -> None:
         """Check references between the parts; raise :class:`SpecError` naming the key path."""
-        _check_names("members", [m.name for m in self.members])
-        _check_names("joints", [j.name for j in self.joints])
+        _check_names(("members",), [m.name for m in self.members])
+        _check_names(("joints",), [j.name for j in self.joints])
         for i, m in enumerate(self.members):
             for node in m.nodes:
-                self._need_node(f"members[{i}].nodes", node)
+                self._need_node(("members", i, "nodes"), node)
             if m.section not in self.sections:
-                raise SpecError(f"members[{i}].section", f"unknown section {m.section!r}")
+                raise SpecError(("members", i, "section"), f"unknown section {m.section!r}")
             if m.material not in self.materials:
-                raise SpecError(f"members[{i}].material", f"unknown material {m.material!r}")
+                raise SpecError(("members", i, "material"), f"unknown material {m.material!r}")
         for i, j in enumerate(self.joints):
             for node in j.nodes:
-                self._need_node(f"joints[{i}].nodes", node)
+                self._need_node(("joints", i, "nodes"), node)
             a, b = (np.array(self.nodes[n]) for n in j.nodes)
             if np.hypot(*(a - b)) > GEOMETRY_TOL_M:
-                raise SpecError(f"joints[{i}].nodes", f"nodes {j.nodes} do not coincide")
+                raise SpecError(("joints", i, "nodes"), f"nodes {j.nodes} do not coincide")
         for i, s in enumerate(self.springs):
-            self._need_node(f"springs[{i}].node", s.node)
-            _need_direction(f"springs[{i}].direction", s.direction)
+            self._need_node(("springs", i, "node"), s.node)
+            _need_direction(("springs", i, "direction"), s.direction)
             if s.to is not None:
-                self._need_node(f"springs[{i}].to", s.to)
+                self._need_node(("springs", i, "to"), s.to)
         for i, m in enumerate(self.masses):
-            self._need_node(f"masses[{i}].node", m.node)
+            self._need_node(("masses", i, "node"), m.node)
         for node, dirs in self.supports.items():
-            self._need_node(f"supports.{node}", node)
+            self._need_node(("supports", node), node)
             for k, d in enumerate(dirs):
-                _need_direction(f"supports.{node}[{k}]", d)
+                _need_direction(("supports", node, k), d)
         for path, coef, positive in self.coefficient_uses():
             if not isinstance(coef, str):
                 _check_value(path, float(coef), positive)
 
-    def _need_node(self, path: str, node: str) -> None:
+    def _need_node(self, path: KeyPath, node: str) -> None:
         if node not in self.nodes:
             raise SpecError(path, f"unknown node {node!r}")
 
 
-def _check_names(path: str, names: list[str]) -> None:
+def _check_names(path: KeyPath, names: list[str]) -> None:
     seen: set[str] = set()
     for i, name in enumerate(names):
         if name in seen:
-            raise SpecError(f"{path}[{i}].name", f"duplicate name {name!r}")
+            raise SpecError((*path, i, "name"), f"duplicate name {name!r}")
         seen.add(name)
 
 
-def _need_direction(path: str, direction: str) -> None:
+def _need_direction(path: KeyPath, direction: str) -> None:
     if direction not in DIRECTIONS:
         raise SpecError(path, f"bad direction {direction!r}; expected one of {DIRECTIONS}")
 
 
-def _check_value(path: str, value: float, positive: bool) -> None:
+def _check_value(path: KeyPath, value: float, positive: bool) -> None:
     if not math.isfinite(value) or value < 0 or (positive and value == 0):
         raise SpecError(path, f"must be {'> 0' if positive else '>= 0'}, got {value!r}")
 
@@ -234,7 +235,7 @@ def _nodes_on_member(frame: FrameSpec, i: int) -> list[tuple[float, str]]:
     a, b = (np.array(frame.nodes[n], dtype=float) for n in m.nodes)
     L = float(np.hypot(*(b - a)))
     if L <= GEOMETRY_TOL_M:
-        raise SpecError(f"members[{i}].nodes", f"nodes {m.nodes} coincide (zero length)")
+        raise SpecError(("members", i, "nodes"), f"nodes {m.nodes} coincide (zero length)")
     e = (b - a) / L
     inside: list[tuple[float, str]] = []
     for name, xy in frame.nodes.items():
@@ -246,7 +247,7 @@ def _nodes_on_member(frame: FrameSpec, i: int) -> list[tuple[float, str]]:
     for (t0, n0), (t1, n1) in zip(inside, inside[1:], strict=False):
         if t1 - t0 <= GEOMETRY_TOL_M:
             raise SpecError(
-                f"members[{i}]",
+                ("members", i),
                 f"nodes {n0!r} and {n1!r} coincide inside the member; split the member there",
             )
     return [(0.0, m.nodes[0]), *inside, (L, m.nodes[1])]
@@ -270,7 +271,7 @@ def mesh_members(
         lengths = [t1 - t0 for (t0, _), (t1, _) in zip(stations, stations[1:], strict=False)]
         if m.elements is not None and m.elements < len(lengths):
             raise SpecError(
-                f"members[{i}].elements",
+                ("members", i, "elements"),
                 f"{m.elements} element(s) cannot cover the {len(lengths)} stretches between "
                 f"the nodes on the member {[n for _, n in stations]}",
             )
@@ -490,7 +491,7 @@ def _check_empty_dofs(labels: tuple[Dof, ...], const: dict, unit: dict) -> None:
     for node, dirs in empty.items():
         unused = len(dirs) == len(DIRECTIONS)
         raise SpecError(
-            f"nodes.{node}",
+            ("nodes", node),
             (
                 "no member, joint, spring or mass uses this node; connect it or remove it"
                 if unused

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..settings import SettingError
+
 __all__ = ["SECTION_SHAPES", "Section", "mass_matrix", "rotation_matrix", "stiffness_matrix"]
 
 SECTION_SHAPES = ("rect", "rect_tube", "general")
@@ -59,21 +61,21 @@ class Section:
             "general": ("area_m2", "inertia_m4"),
         }
         if self.shape not in needed:
-            raise ValueError(
-                f"shape: unknown shape {self.shape!r}; expected one of {SECTION_SHAPES}"
+            raise SettingError(
+                ("shape",), f"unknown shape {self.shape!r}; expected one of {SECTION_SHAPES}"
             )
         for name in ("b_m", "h_m", "outer_m", "wall_m", "area_m2", "inertia_m4"):
             value = getattr(self, name)
             if name in needed[self.shape]:
                 if value is None:
-                    raise ValueError(f"{name}: required for shape {self.shape!r}")
+                    raise SettingError((name,), f"required for shape {self.shape!r}")
                 if not (math.isfinite(value) and value > 0):
-                    raise ValueError(f"{name}: must be a positive number, got {value!r}")
+                    raise SettingError((name,), f"must be a positive number, got {value!r}")
             elif value is not None and name not in ("area_m2", "inertia_m4"):
-                raise ValueError(f"{name}: not used by shape {self.shape!r}")
+                raise SettingError((name,), f"not used by shape {self.shape!r}")
         if self.shape == "rect_tube" and not 2 * self.wall_m < self.outer_m:
-            raise ValueError(
-                f"wall_m: wall {self.wall_m} m is too thick for outer side {self.outer_m} m"
+            raise SettingError(
+                ("wall_m",), f"wall {self.wall_m} m is too thick for outer side {self.outer_m} m"
             )
         if self.shape != "general":
             object.__setattr__(self, "area_m2", self._area())

@@ -8,12 +8,23 @@ assembles them into plans and :mod:`rig.config.plan_files` reads them from TOML.
 from __future__ import annotations
 
 from fractions import Fraction
-from typing import Annotated, Any, ClassVar, Literal, get_args
+from typing import Any, ClassVar, Literal, get_args
 
 import numpy as np
-from pydantic import Field, model_serializer, model_validator
+from pydantic import model_serializer, model_validator
 
-from rig.config.settings import Flag, Integer, Number, Orders, SettingError, Text, settings
+from rig.config.settings import (
+    Flag,
+    Integer,
+    NonNegative,
+    Number,
+    Orders,
+    Positive,
+    SettingError,
+    Text,
+    settings,
+)
+from rig.config.settings import declare as _doc
 from rig.signals.multisine import MultisineSpec
 from rig.signals.random import RandomKind
 
@@ -45,14 +56,6 @@ MAX_PLAN_STEPS = 100_000
 
 class PlanTooLarge(SettingError):
     """A plan (or one frequency range of it) with more than :data:`MAX_PLAN_STEPS` steps."""
-
-
-def _doc(doc: str, default: Any = ..., **bounds: Any) -> Any:
-    return Field(default, description=doc, **bounds)
-
-
-Positive = Annotated[Number, Field(gt=0)]
-NonNegative = Annotated[Number, Field(ge=0)]
 
 
 # ------------------------------------------------------------------------ frequencies

@@ -46,13 +46,15 @@ from rig.backends.protocol import AcquisitionConfig, AIChannelConfig, AOChannelC
 from rig.config.settings import (
     Flag,
     Integer,
-    Number,
+    NonNegative,
+    Positive,
     SettingError,
     Text,
     build,
     dump,
     settings,
 )
+from rig.config.settings import declare as _doc
 from rig.config.tomlconfig import ConfigError, read_toml
 
 __all__ = [
@@ -95,14 +97,8 @@ def _check_date(value: str) -> str:
     return value
 
 
-def _doc(doc: str, default: Any = ..., **bounds: Any) -> Any:
-    return Field(default, description=doc, **bounds)
-
-
 Name = Annotated[Text, Field(min_length=1, pattern=r"\S")]
 Axis = Annotated[Text, AfterValidator(_direction)]
-Positive = Annotated[Number, Field(gt=0)]
-NonNegative = Annotated[Number, Field(ge=0)]
 
 
 @settings(kw_only=True)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -16,6 +18,7 @@ from analysis.model import (
     ParameterBoundsWarning,
     load_model,
 )
+from analysis.settings import build, dotted, dump
 
 
 class _TestSpring(NonlinearElement):
@@ -267,9 +270,9 @@ ERRORS = {
     "bad scaling": (
         'unit = "Pa"',
         'unit = "Pa"\nscaling = "cubic"',
-        "parameters.E.scaling: must be 'linear' or 'log'",
+        "parameters.E.scaling: expected 'linear' or 'log', got 'cubic'",
     ),
-    "unknown key": ("[points.1]", "[points.1]\nspeed = 3", "points.1.speed: unknown key"),
+    "unknown key": ("[points.1]", "[points.1]\nspeed = 3", "points.1: unknown key(s) 'speed'"),
     "bad TOML": ('title = "cantilever"', 'title = "cantilever', "invalid TOML"),
 }
 
@@ -439,3 +442,74 @@ def test_a_value_outside_its_bounds_is_a_warning_naming_it(tmp_path):
 def test_values_within_bounds_load_without_a_warning(recwarn):
     load_model()
     assert not [w for w in recwarn if issubclass(w.category, ParameterBoundsWarning)]
+
+
+# -- the declared settings: shipped files, key paths as tuples -----------------------------
+ROOT = Path(__file__).resolve().parents[2]
+SHIPPED = sorted([*ROOT.glob("analysis/models/*.toml"), *ROOT.glob("examples/*.toml")])
+
+
+def test_the_paper_model_reads_to_the_values_its_file_gives():
+    model = load_model(ROOT / "analysis/models/clearance_rig.toml")
+    k_mount = model.parameters["k_mount"]
+    assert (k_mount.value, k_mount.nominal, k_mount.lower, k_mount.upper) == (1e4, 1e4, 1e3, 1e6)
+    assert (k_mount.scaling, k_mount.group, k_mount.calibrate) == ("log", "linear", True)
+    assert model.parameters["gap"].group == "nonlinear"
+    assert model.damping == DampingSpec(default_zeta=0.01) and model.damping.modal
+    (stop,) = model.nonlinear
+    assert (stop.kind, stop.at) == ("hertz_contact", DofRef("tip", "y", 7))
+    assert stop.params == {"k_c": "k_c", "gap": "gap", "v": "v_c"}
+    assert [m.elements for m in model.frame.members][:2] == [13, 7]
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.name)
+def test_shipped_model_files_round_trip(tmp_path, path):
+    model = load_model(path)
+    again = load_model(model.save(tmp_path / path.name))
+    assert again == model
+    for p in model.parameters.values():
+        assert build(Parameter, dump(p), "dump") == p
+    assert build(DampingSpec, dump(model.damping), "dump") == model.damping
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "path", "problem"),
+    [
+        ("lower = 1e11", "lower = nan", ("parameters", "E", "lower"), "must be a number"),
+        ("lower = 1e11", "lower = 4e11", ("parameters", "E", "lower"), "must be below upper"),
+        ("calibrate = true", "calibrate = 1", ("parameters", "E", "calibrate"), "true or false"),
+        ('unit = "Pa"', 'unit = "Pa"\nprior_rel_std = 0.0', ("parameters", "E", "prior_rel_std"),
+         "must be > 0"),
+        ('direction = "y"', 'direction = "y"\nxy = [1.0, 2e4]', ("points", "1", "xy", 1),
+         "must be <= 10000"),
+        (ERRORS["unknown section"][0], BAD_SECTION, ("members", 1, "section"), "unknown section"),
+        ("b = 0.02", "b = -0.02", ("sections", "bar", "b"), "must be a positive number"),
+        ("elements = 2\n[supports]", "elements = 0\n[supports]", ("members", 1, "elements"),
+         "must be a positive integer"),
+        ("[parameters.E]", "[damping.per_mode]\n2 = 1.5\n[parameters.E]",
+         ("damping", "per_mode", "2"), "must be < 1"),
+        ("[parameters.E]", "[damping.per_mode]\nx = 0.1\n[parameters.E]",
+         ("damping", "per_mode", "x"), "mode numbers start at 1"),
+        ("[parameters.E]", "[damping.rayleigh]\nalpha = -1.0\n[parameters.E]",
+         ("damping", "rayleigh", "alpha"), "must be >= 0, got -1.0"),
+        ("[parameters.E]", "[damping]\nmatrix = [[1.0, 2.0]]\n[parameters.E]",
+         ("damping", "matrix"), "square"),
+    ],
+)  # fmt: skip
+def test_errors_carry_the_key_path_as_a_tuple(tmp_path, old, new, path, problem):
+    assert old in SIMPLE
+    file = tmp_path / "bad.toml"
+    file.write_text(SIMPLE.replace(old, new, 1))
+    with pytest.raises(ModelFileError, match=problem) as info:
+        load_model(file)
+    assert info.value.path == path
+    assert str(info.value).startswith(f"{file}: {dotted(path)}: ")
+
+
+def test_records_built_in_python_name_the_class_and_field():
+    with pytest.raises(ValueError, match=r"Parameter\.nominal: 5\.0 is outside \[0\.0, 1\.0\]"):
+        Parameter("p", 0.5, 5.0, 0.0, 1.0)
+    with pytest.raises(ValueError, match=r"DampingSpec\.default_zeta: must be < 1"):
+        DampingSpec(default_zeta=1.0)
+    with pytest.raises(ValueError, match="give a point, or a node and a direction"):
+        DofRef(node="tip")

@@ -6,8 +6,18 @@ import numpy as np
 import pytest
 
 from analysis.model import ModelFileError, load_model
+from analysis.settings import ConfigError, build, dotted, dump
+from sim_backend.amplifier import AmplifierConstants
+from sim_backend.shaker import ShakerConstants
 from sim_backend.sizing import PaperTest, second_mode_frequencies, truth_misfit
-from sim_backend.truth import TRUTH_DIR, list_truths, load_truth
+from sim_backend.truth import (
+    TRUTH_DIR,
+    NoiseFloors,
+    SensorDefaults,
+    TruthTable,
+    list_truths,
+    load_truth,
+)
 
 HIDDEN = ("hardening_mounts", "clamp_friction", "two_sided_stop", "damper_p5", "mass_loading")
 # Hidden effects at the locations the diagnosis is to reach: one spring of a group, a beam
@@ -230,3 +240,65 @@ def test_one_mount_ties_with_the_group_in_the_papers_band_not_in_the_suspension_
     suspension = np.round(np.arange(9.0, 17.01, 0.25), 6)
     assert truth_misfit(look_alike, reference=truth).rms_sigma < 1.0
     assert truth_misfit(look_alike, reference=truth, frequencies_hz=suspension).rms_sigma > 10.0
+
+
+# -- the [truth] table, read through the declared settings ---------------------------------
+
+
+def test_reference_truth_table_reads_to_the_values_the_file_gives() -> None:
+    truth = load_truth("reference")
+    assert (truth.seed, truth.drive_point, truth.hidden_effect) == (20160919, 3, "none")
+    assert truth.noise == NoiseFloors(0.0008, 0.06, 1.0e-5)
+    assert truth.shaker == ShakerConstants()  # the file repeats the shaker's defaults
+    assert truth.amplifier == AmplifierConstants(
+        gain_v_per_v=10.0, bandwidth_hz=20000.0, current_limit_a=5.0, output_resistance_ohm=0.05
+    )
+    assert truth.sensors == SensorDefaults(0.0055, 0.01, 16)
+    assert truth.model.damping.per_mode == {1: 0.04, 2: 0.04, 3: 0.04, 4: 0.006, 5: 0.008}
+    assert isinstance(truth.shaker.armature_mass_kg, float)
+
+
+@pytest.mark.parametrize("name", ["reference", "clamp_friction", "mass_loading"])
+def test_truth_table_round_trips_through_its_plain_data(name: str) -> None:
+    truth = load_truth(name)
+    table = build(TruthTable, truth.model.truth, name, at=("truth",))
+    assert build(TruthTable, dump(table), name) == table
+    assert (table.noise, table.shaker, table.amplifier, table.sensors) == (
+        truth.noise,
+        truth.shaker,
+        truth.amplifier,
+        truth.sensors,
+    )
+
+
+def _with_truth_lines(tmp_path, old: str, new: str):
+    text = TRUTH_DIR.joinpath("reference.toml").read_text()
+    assert old in text
+    path = tmp_path / "edited.toml"
+    path.write_text(text.replace(old, new))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "path", "problem"),
+    [
+        ("force_n_per_rthz = 0.0008", "force_n_per_rthz = -1.0",
+         ("truth", "noise", "force_n_per_rthz"), "must be >= 0"),
+        ("coil_resistance_ohm = 1.5", "coil_resistance_ohm = 0.0",
+         ("truth", "shaker", "coil_resistance_ohm"), "must be > 0"),
+        ("bandwidth_hz = 20000.0", 'bandwidth_hz = "fast"',
+         ("truth", "amplifier", "bandwidth_hz"), "expected a number"),
+        ("gain_v_per_v = 10.0", "gain_v_per_v = 30.0",
+         ("truth", "amplifier", "gain_v_per_v"), "outside the settable range"),
+        ("adc_bits = 16", "adc_bits = 64", ("truth", "sensors", "adc_bits"), "must be <= 32"),
+        ("seed = 20160919", "seed = -1", ("truth", "seed"), "must be >= 0"),
+        ("drive_point = 3", "drive_point = 99", ("truth", "drive_point"), "is not a point"),
+        ("drive_point = 3", "drive_point = 3\ndrive_pont = 4", ("truth",), "unknown key"),
+        ("adc_bits = 16", "adc_bits = 16\nbits = 4", ("truth", "sensors"), "unknown key"),
+    ],
+)  # fmt: skip
+def test_a_bad_truth_value_names_the_file_and_its_key_path(tmp_path, old, new, path, problem):
+    with pytest.raises(ConfigError, match=problem) as info:
+        load_truth(_with_truth_lines(tmp_path, old, new))
+    assert info.value.path == path
+    assert str(info.value).startswith(f"{tmp_path / 'edited.toml'}: {dotted(path)}: ")
