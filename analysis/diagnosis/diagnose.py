@@ -323,6 +323,7 @@ def _merge(done: list[Verified], i: int, v: Verified) -> None:
     if v.chi2_per_dof() < done[i].chi2_per_dof():
         v.seconds += done[i].seconds
         v.cpu_seconds += done[i].cpu_seconds
+        v.evaluations += done[i].evaluations
         v.history = done[i].history + v.history
         done[i] = v
 
@@ -755,6 +756,7 @@ def _restart_best(run: _Verifying, jobs: _Jobs, ex, say) -> None:
         v = p.result()
         if v.chi2_per_dof() < done[i].chi2_per_dof():
             v.seconds += done[i].seconds
+            v.evaluations += done[i].evaluations
             done[i] = v
 
 

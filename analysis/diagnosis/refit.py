@@ -53,6 +53,10 @@ class Refit:
         Metric of every start tried (``inf`` where the model did not converge).
     lm : LeastSquaresResult
     seconds : float
+    evaluations : int
+        Evaluations of the objective (the balance on every fitted step, with or without its
+        Jacobian): the start model's, the starts' and Levenberg-Marquardt's, over every pass.
+        The work the fit did, the same however busy the machine is.
     """
 
     model: Model
@@ -64,6 +68,7 @@ class Refit:
     start_costs: list[float] = field(default_factory=list)
     lm: LeastSquaresResult | None = None
     seconds: float = 0.0
+    evaluations: int = 0
 
 
 def _objective(model, data, names, rows, n_harmonics, n_time) -> FRFObjective:
@@ -161,10 +166,12 @@ class _Remember:
 
     def __init__(self, obj: FRFObjective, rule: StopRule = StopRule()) -> None:
         self.obj, self.x, self.r, self.rule = obj, None, None, rule
+        self.calls = 0  # evaluations, with or without the Jacobian
 
     def __call__(self, x, want_jac):
         if self.x is not None and self.rule.out_of_time():
             raise _Stop(OUT_OF_TIME)
+        self.calls += 1
         r, J = self.obj(x, want_jac)
         if want_jac:
             self.x, self.r = np.array(x, float), r
@@ -206,10 +213,16 @@ def _stopped(fun: _Remember, seen: list[dict], message: str) -> LeastSquaresResu
     """The result at the last accepted iterate of a stopped fit (no covariance: a stopped
     fit's means nothing, and a Jacobian costs a full sensitivity solve)."""
     x = np.array(seen[-1]["x"])
-    r = fun.r if fun.x is not None and np.array_equal(fun.x, x) else fun.obj(x, False)[0]
+    if fun.x is not None and np.array_equal(fun.x, x):
+        r = fun.r
+    else:
+        fun.calls += 1
+        r = fun.obj(x, False)[0]
     cov = np.full((x.size, x.size), np.nan)
+    it = seen[-1]["iteration"]
+    # nfev counts every evaluation, as least_squares_lm's does; njev is not tracked here
     return LeastSquaresResult(
-        x, 0.5 * float(r @ r), r, None, cov, 0, 0, seen[-1]["iteration"], False, message, list(seen)
+        x, 0.5 * float(r @ r), r, None, cov, fun.calls, 0, it, False, message, list(seen)
     )
 
 
@@ -336,9 +349,9 @@ def refit(
     p0 = np.array([_current(model, n) for n in names])
     thetas = _start_thetas(space, names, p0, starts, distributions, n_random_starts, seed)
     whole = good.size == rows.size
-    costs = _start_costs(obj, thetas, p0, base if whole else None, progress)
+    costs, n_start_evaluations = _start_costs(obj, thetas, p0, base if whole else None, progress)
     deadline = None if max_seconds is None else time.process_time() + max_seconds
-    best, reweigh = _lm_from_starts(
+    best, reweigh, n_lm_evaluations = _lm_from_starts(
         obj,
         thetas,
         costs,
@@ -351,6 +364,8 @@ def refit(
     if len(thetas) == 1 and best is not None and best.history:
         costs = np.array([best.history[0]["cost"]])
     out = _as_refit(model, names, space, best, costs, t0)
+    # the start model's prediction, the starts' metrics, Levenberg-Marquardt's evaluations
+    out.evaluations = 1 + n_start_evaluations + n_lm_evaluations
     left = None if deadline is None else deadline - time.process_time()
     if not reweigh or best.nit >= max_iterations or (left is not None and left <= 0):
         return out
@@ -405,11 +420,13 @@ def _start_thetas(space, names, p0, starts, distributions, n_random_starts: int,
     return np.clip(np.array([space.to_theta(c) for c in candidates]), lo, hi)
 
 
-def _start_costs(obj: FRFObjective, thetas, p0, base, progress) -> np.ndarray:
-    """The metric at each start; ``base`` is the start model's prediction when it holds on
-    every fitted step (the first start's metric without a solve)."""
+def _start_costs(obj: FRFObjective, thetas, p0, base, progress) -> tuple[np.ndarray, int]:
+    """The metric at each start and the evaluations that took; ``base`` is the start model's
+    prediction when it holds on every fitted step (the first start's metric without a
+    solve)."""
     space = obj.space
     costs = []
+    evaluations = 0
     if len(thetas) == 1:
         costs = [np.nan]  # one start: its metric is Levenberg-Marquardt's first evaluation
     else:
@@ -422,12 +439,13 @@ def _start_costs(obj: FRFObjective, thetas, p0, base, progress) -> np.ndarray:
                 costs.append(obj.cost_of(base))  # the start model itself, predicted above
             else:
                 costs.append(obj.cost(th))
+                evaluations += 1
             if progress:
                 progress("start", {"index": i, "n": len(thetas), "cost": costs[-1]})
     out = np.array(costs)
     if len(thetas) > 1 and not np.isfinite(out).any():
         raise RuntimeError("no start gives a converged model response on the fitted steps")
-    return out
+    return out, evaluations
 
 
 def _lm_from_starts(
@@ -439,19 +457,21 @@ def _lm_from_starts(
     max_iterations: int,
     ftol: float,
     progress,
-) -> tuple[LeastSquaresResult | None, bool]:
-    """Levenberg-Marquardt from the ``n_lm_starts`` best starts; the best fit, and whether it
-    stopped for its weights to be recomputed."""
+) -> tuple[LeastSquaresResult | None, bool, int]:
+    """Levenberg-Marquardt from the ``n_lm_starts`` best starts; the best fit, whether it
+    stopped for its weights to be recomputed, and the evaluations of every start's fit."""
     best: LeastSquaresResult | None = None
     reweigh = False
+    evaluations = 0
     for k in np.argsort(costs)[:n_lm_starts]:
         if len(thetas) > 1 and not np.isfinite(costs[k]):
             continue
         res = _lm_until(obj, thetas[k], rule, max_iterations, ftol, progress)
         reweigh = reweigh or res.message == REWEIGH
+        evaluations += res.nfev
         if best is None or res.cost < best.cost:
             best = res
-    return best, reweigh
+    return best, reweigh, evaluations
 
 
 def _as_refit(model: Model, names, space, best: LeastSquaresResult, costs, t0: float) -> Refit:
@@ -495,6 +515,7 @@ def _joined(out: Refit, nxt: Refit, nit: int, t0: float) -> Refit:
         history=[{**h, "pass": 0} for h in out.history] + later,
         start_costs=out.start_costs,
         seconds=time.perf_counter() - t0,
+        evaluations=out.evaluations + nxt.evaluations,
     )
 
 
@@ -503,6 +524,7 @@ def _reweighted(fit: Refit, again: Callable[..., Refit], passes: int, max_iterat
     from the model's values with the weights recomputed there."""
     t0 = time.perf_counter() - fit.seconds
     fits, own = [fit], []
+    evaluations = fit.evaluations
     for k in range(1, passes + 2):
         # one start, the last fit's values: its first metric is the last fit's own one
         last = k > passes
@@ -512,6 +534,7 @@ def _reweighted(fit: Refit, again: Callable[..., Refit], passes: int, max_iterat
             log.info("reweighting stopped after pass %d: %s", k - 1, exc)
             own.append(np.inf)
             break
+        evaluations += nxt.evaluations
         own.append(2 * nxt.start_costs[0] / max(nxt.n_residuals - len(nxt.parameters), 1))
         if last:
             break
@@ -523,5 +546,9 @@ def _reweighted(fit: Refit, again: Callable[..., Refit], passes: int, max_iterat
         offset = history[-1]["iteration"]
     log.info("reweighted fits: own chi2/dof %s, kept pass %d", own, kept)
     return dataclasses.replace(
-        fits[kept], history=history, start_costs=fit.start_costs, seconds=time.perf_counter() - t0
+        fits[kept],
+        history=history,
+        start_costs=fit.start_costs,
+        seconds=time.perf_counter() - t0,
+        evaluations=evaluations,
     )

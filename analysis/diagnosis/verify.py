@@ -137,6 +137,9 @@ class Verified:
     message : str
     cpu_seconds : float
         Processor time of the verification (its process's).
+    evaluations : int
+        Evaluations of the objective by its recalibration
+        (:attr:`~analysis.diagnosis.refit.Refit.evaluations`): the work it did.
     """
 
     candidate: Candidate | None
@@ -149,6 +152,7 @@ class Verified:
     seconds: float = 0.0
     message: str = ""
     cpu_seconds: float = 0.0
+    evaluations: int = 0
 
     @property
     def failed(self) -> bool:
@@ -322,7 +326,7 @@ def _verify(job: VerifyJob, t0: float) -> Verified:
             n: Distribution("loguniform", 0.002, 0.05) for n in names if n.startswith("zeta_")
         }
     rows = calibration_rows(data) if job.rows is None else np.asarray(job.rows, int)
-    message = ""
+    message, evaluations = "", 0
     try:
         r = refit(
             m2,
@@ -344,6 +348,7 @@ def _verify(job: VerifyJob, t0: float) -> Verified:
         )
         fitted, history, params = r.model, r.history, r.parameters
         message = r.lm.message if r.lm is not None else ""
+        evaluations = r.evaluations
     except (RuntimeError, ValueError) as exc:
         label = "the model" if cand is None else cand.label
         log.warning("verification of %s failed: %s", label, exc)
@@ -365,4 +370,5 @@ def _verify(job: VerifyJob, t0: float) -> Verified:
         linear=linear_info,
         seconds=time.perf_counter() - t0,
         message=message,
+        evaluations=evaluations,
     )

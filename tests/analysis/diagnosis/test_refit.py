@@ -195,7 +195,10 @@ def test_a_stopped_fit_ends_at_its_last_iterate_and_says_why() -> None:
     target = np.array([3.0, -2.0])
     space = SimpleNamespace(size=2, theta_bounds=lambda: (np.full(2, -10.0), np.full(2, 10.0)))
 
+    calls = []
+
     def obj(x, want_jac):
+        calls.append(want_jac)
         # r = (x - target) and 10 rows of a constant misfit: the cost cannot fall below 0.5 * 10
         r = np.concatenate([x - target, np.ones(10)])
         J = np.vstack([np.eye(2), np.zeros((10, 2))]) if want_jac else None
@@ -204,9 +207,12 @@ def test_a_stopped_fit_ends_at_its_last_iterate_and_says_why() -> None:
     fake = type("Obj", (), {"space": space, "__call__": staticmethod(obj)})()
     free = _lm_until(fake, np.zeros(2), StopRule(), 20, 1e-12, None)
     assert free.success and np.allclose(free.x, target, atol=1e-6)
+    assert free.nfev == len(calls)  # every evaluation counted, with the Jacobian or not
+    calls.clear()
     # a bar no fit can get under: chi2/dof = 2 cost / (12 - 2) >= 1 > 0.1
     stopped = _lm_until(fake, np.zeros(2), StopRule(give_up_chi2=0.1), 20, 1e-12, None)
     assert stopped.message == NO_BETTER and not stopped.success
+    assert stopped.nfev == len(calls)
     assert stopped.nit == len(stopped.history) - 1 >= 1
     x = np.array(stopped.history[-1]["x"])
     assert np.array_equal(stopped.x, x)
