@@ -308,10 +308,9 @@ def refit(
         Recompute the weights when an iteration stalls (lowers the metric by less than
         :data:`STALL`) at a metric ``reweight_drop`` times or more below the one they were
         computed at (the model has moved far from the start whose tangents they hold), and go
-        on from there with the iterations and processor time left; again at each such stall.
-        Levenberg-Marquardt on stale weights stalls far above the noise: the clamp's friction
-        went 823 -> 9.1 -> 4.2 -> 3.6 -> 3.4 and stayed there; with the weights recomputed
-        at 9.1 it stalled at 3.35 too, at 3.4 it reached 1.16 in one iteration.
+        on from there with the iterations and processor time left; again at each such stall
+        (Levenberg-Marquardt on stale weights stalls far above the noise: docs/diagnosis.md,
+        the rules table).
 
     Returns
     -------

@@ -205,12 +205,8 @@ def start_distributions(
 def calibration_rows(data) -> np.ndarray:
     """Steps a verification fits: those the rig converged at, on every level but the highest
     where three or more remain, which validates (the paper's 2, 4 and 6 N of four levels, as
-    its calibration and :func:`~analysis.diagnosis.augment.augment` do). Fitted on every
-    level, a candidate can settle where a step of the highest one sits on another branch: the
-    mass at point 6 of the benchmark's run stopped at 41 x noise so, and reaches 1.81 fitted
-    on 2, 4 and 6 N. With fewer levels every one is fitted (two levels cannot pin how a law
-    grows with the amplitude: a cubic spring at the mounts was not found on 2 and 5 N of
-    three)."""
+    its calibration and :func:`~analysis.diagnosis.augment.augment` do); with fewer levels
+    every one (docs/diagnosis.md, the rules table)."""
     levels = sorted(float(x) for x in data.levels_n)
     return fitted_rows(data, levels[:-1] if len(levels) >= 4 else levels)
 
@@ -244,9 +240,7 @@ def _linear_recalibration(model: Model, run: str, names: list[str]):
 
 
 #: Factors applied to the screen's coefficients of a candidate at unmeasured DOFs for further
-#: starts: a screen reads the states there coarsely, and a stiff law started at twice its
-#: value can put the balance on another branch (the hardening mounts' k3 screened at 1.9 times
-#: the truth's scores 172 x noise there, at half that 4.4).
+#: starts: a screen reads the states there coarsely (docs/diagnosis.md, the rules table).
 UNMEASURED_START_FACTORS = (0.5, 2.0)
 
 
