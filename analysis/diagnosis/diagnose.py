@@ -69,7 +69,7 @@ from analysis.diagnosis.screen import (
 )
 from analysis.diagnosis.signatures import FAMILIES, Evidence, find_signatures
 from analysis.diagnosis.verify import Verified, VerifyJob, run_verify
-from analysis.executors import open_executor
+from analysis.executors import Deferred, open_executor
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 from analysis.predict_branches import BranchMatchedPredictor
@@ -142,19 +142,6 @@ def _run_verifications(
             if (nxt := next_of(i)) is not None:
                 running[ex.submit(run_verify, nxt)] = (i, True)
     return dict(sorted(out.items())), further
-
-
-class _Later:
-    """A job's result: from an executor's future, or computed in this process on demand."""
-
-    def __init__(self, executor, fn, job) -> None:
-        self._future = executor.submit(fn, job) if executor is not None else None
-        self._fn, self._job = fn, job
-
-    def result(self):
-        if self._future is not None:
-            return self._future.result()
-        return self._fn(self._job)
 
 
 def _screen_from(model: Model, data, st: DiagnosisSettings, pred=None) -> Screen:
@@ -551,17 +538,17 @@ def _screen_step(
     # the screen's first pass shared with a worker; the recalibration and the linear
     # test's candidates on the workers meanwhile
     mine, theirs = (nonlinear[0::2], nonlinear[1::2]) if ex is not None else (nonlinear, [])
-    share = _Later(
+    share = Deferred(
         ex,
         screen_pass,
         ScreenJob(jobs.text, jobs.source, jobs.path, tuple(theirs), st.n_harmonics, st.n_time),
     )
-    refit_job = _Later(ex, run_verify, jobs.verify(None))
+    refit_job = Deferred(ex, run_verify, jobs.verify(None))
     lin_jobs = []
     if jobs.linear_run is not None:
         lin = [c for c in cands if c.law.kind in ("mass", "linear_spring", "joint_spring")]
         lin_jobs = [
-            _Later(ex, run_linear_job, LinearJob(jobs.text, jobs.source, jobs.linear_run, c))
+            Deferred(ex, run_linear_job, LinearJob(jobs.text, jobs.source, jobs.linear_run, c))
             for c in [None, *lin]
         ]
     screen = _screen_from(model, data, st, pred)
@@ -599,7 +586,7 @@ def _screen_step(
     )
 
 
-def _linear_results(lin_jobs: list[_Later], say) -> tuple[LinearFit | None, list[LinearFit]]:
+def _linear_results(lin_jobs: list[Deferred], say) -> tuple[LinearFit | None, list[LinearFit]]:
     """The linear test's recalibrated model and its candidates, best first."""
     if not lin_jobs:
         return None, []
@@ -687,7 +674,9 @@ def _continue_falling(run: _Verifying, further: list[int], jobs: _Jobs, ex, say)
     going = run.policy.to_continue(run.summaries(), further)
     if going:
         say("continue", {"n": len(going)})
-    cont = [_Later(ex, run_verify, jobs.go_on(run.origin[i].candidate, run.done[i])) for i in going]
+    cont = [
+        Deferred(ex, run_verify, jobs.go_on(run.origin[i].candidate, run.done[i])) for i in going
+    ]
     for i, p in zip(going, cont, strict=True):
         _merge(run.done, i, p.result())
 
@@ -714,7 +703,7 @@ def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say) -> Non
         walk = [(f, f.values, f.known) for f in laws]
         say("other laws", {"n": len(walk)})
     more = [
-        _Later(
+        Deferred(
             ex,
             run_verify,
             dataclasses.replace(jobs.verify(f.candidate, values, known), give_up_chi2=run.bar),
@@ -729,7 +718,9 @@ def _second_picks(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say) -> None:
     """If none explains it, while time is left, the short list's second stage."""
     if not run.policy.second_stage(run.summaries(), len(sc.second)):
         return
-    more = [_Later(ex, run_verify, jobs.verify(f.candidate, f.values, f.known)) for f in sc.second]
+    more = [
+        Deferred(ex, run_verify, jobs.verify(f.candidate, f.values, f.known)) for f in sc.second
+    ]
     run.done += [p.result() for p in more]
     run.origin += sc.second
     say("verified", {"n": len(run.done), "best_rms": _best_rms(run.done)})
@@ -751,7 +742,7 @@ def _restart_best(run: _Verifying, jobs: _Jobs, ex, say) -> None:
             job = jobs.verify(o.candidate, start_toml=o.model_toml, n_starts=st.n_starts)
         else:
             job = jobs.verify(o.candidate, o.values, o.known, n_starts=st.n_starts)
-        retry.append(_Later(ex, run_verify, job))
+        retry.append(Deferred(ex, run_verify, job))
     for i, p in zip(again, retry, strict=True):
         v = p.result()
         if v.chi2_per_dof() < done[i].chi2_per_dof():
