@@ -16,10 +16,10 @@ import contextlib
 import logging
 import os
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
-from typing import TypeVar
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
+from typing import Generic, TypeVar
 
-__all__ = ["open_executor", "run_jobs"]
+__all__ = ["Deferred", "open_executor", "run_jobs"]
 
 log = logging.getLogger(__name__)
 
@@ -111,3 +111,21 @@ def run_jobs(
         for k, _ in enumerate(as_completed(futures), 1):
             on_done(k)
     return [f.result() for f in futures]
+
+
+class Deferred(Generic[J, R]):
+    """``fn(job)``: started on ``executor`` at once, or, without one, computed in this process
+    when :meth:`result` is first asked for (so work that is never asked for is never done
+    serially, and the order of the asks is the order of the work)."""
+
+    def __init__(self, executor: Executor | None, fn: Callable[[J], R], job: J) -> None:
+        self._future: Future[R] | None = executor.submit(fn, job) if executor is not None else None
+        self._fn, self._job = fn, job
+        self._done: list[R] = []
+
+    def result(self) -> R:
+        if self._future is not None:
+            return self._future.result()
+        if not self._done:
+            self._done.append(self._fn(self._job))
+        return self._done[0]

@@ -58,6 +58,7 @@ import numpy as np
 from analysis.diagnosis.candidates import Candidate, default_candidates
 from analysis.diagnosis.compare import compare
 from analysis.diagnosis.linear_screen import LinearFit, LinearJob, run_linear_job
+from analysis.diagnosis.policy import FitSummary, Policy, simplest_of_next, tie_groups
 from analysis.diagnosis.result import Diagnosis, DiagnosisSettings, RankedCandidate
 from analysis.diagnosis.screen import (
     Screen,
@@ -68,7 +69,7 @@ from analysis.diagnosis.screen import (
 )
 from analysis.diagnosis.signatures import FAMILIES, Evidence, find_signatures
 from analysis.diagnosis.verify import Verified, VerifyJob, run_verify
-from analysis.executors import open_executor
+from analysis.executors import Deferred, open_executor
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 from analysis.predict_branches import BranchMatchedPredictor
@@ -143,19 +144,6 @@ def _run_verifications(
     return dict(sorted(out.items())), further
 
 
-class _Later:
-    """A job's result: from an executor's future, or computed in this process on demand."""
-
-    def __init__(self, executor, fn, job) -> None:
-        self._future = executor.submit(fn, job) if executor is not None else None
-        self._fn, self._job = fn, job
-
-    def result(self):
-        if self._future is not None:
-            return self._future.result()
-        return self._fn(self._job)
-
-
 def _screen_from(model: Model, data, st: DiagnosisSettings, pred=None) -> Screen:
     pred = pred or BranchMatchedPredictor(model, data, n_harmonics=st.n_harmonics, n_time=st.n_time)
     return Screen(model, data, predictor=pred)
@@ -164,18 +152,6 @@ def _screen_from(model: Model, data, st: DiagnosisSettings, pred=None) -> Screen
 def _lead(fits: list[ScreenFit]) -> ScreenFit | None:
     """The screen's best nonlinear candidate: the first :func:`_shortlist` picks."""
     return next((f for f in fits if f.candidate.law.kind not in _LINEAR_KINDS), None)
-
-
-def _rescreen(refit: Verified, cmp, st: DiagnosisSettings) -> bool:
-    """The recalibrated model is far below the calibrated one: the calibration was a poor
-    start, and the screen runs again from the recalibrated model."""
-    return not refit.failed and refit.rms_over_noise() <= st.rescreen_ratio * cmp.rms_over_noise
-
-
-def _settled(refit: Verified, cmp, st: DiagnosisSettings) -> bool:
-    """The recalibrated model is at the noise (nothing to verify) or a rescreen case (every
-    verification starts from it)."""
-    return refit.rms_over_noise() <= st.adequate_rms or _rescreen(refit, cmp, st)
 
 
 def _best_rms(done: list[Verified]) -> float:
@@ -329,65 +305,12 @@ def _walk_jobs(best, fits: list[ScreenFit], tried, n: int):
     return [(f, values, known) for f in _other_points(fits, cand, tried)[:n]]
 
 
-def _walk_to(lead, best: Verified, refit: Verified, st: DiagnosisSettings) -> str | None:
-    """Where the best verified candidate (``lead``, its origin; ``best``, its verification)
-    walks after the first verifications: ``"points"`` (its law at the next measured points)
-    from a measured point when it explains the misfit or went most of the way
-    (:func:`_promising`; a law that explains little at its point explains little at the
-    next), ``"laws"`` (the next laws there) from an unmeasured location not at the noise, else
-    None (a linear candidate has nowhere to walk)."""
-    if not isinstance(lead, ScreenFit):
-        return None
-    rms = best.rms_over_noise()
-    if lead.candidate.location.kind == "point":
-        return "points" if rms <= st.explained_rms or _promising(best, refit, st) else None
-    return "laws" if rms > st.adequate_rms else None
-
-
-def _promising(v: Verified, refit: Verified, st: DiagnosisSettings) -> bool:
-    """The fit went most of the way: a strong effect's, not one that explains little."""
-    return v.rms_over_noise() <= st.restart_fraction * refit.rms_over_noise()
-
-
-def _to_continue(
-    done: list[Verified], refit: Verified, st: DiagnosisSettings, time_left: bool, continued=()
-) -> list[int]:
-    """The verifications that go on from where they stopped: at most two (best first) with
-    those in ``continued`` (gone on already, as soon as they finished: :func:`_goes_on_at_once`).
-
-    A strong effect's fit may need longer than the time a verification has: those stopped for
-    time while still lowering the metric fast go on while the stage has time; those that went
-    most of the way (:func:`_promising`) go on in any case. Each goes on with the weights (the
-    force's error through the model) recomputed at its values, and once more at the values it
-    reaches: the start model's tangents can stall a fit above the noise near a jump (the
-    clamp's friction at 3.4 x the noise's chi-square, 1.16 one iteration after reweighting).
-    """
-    going = [
-        i
-        for i, v in enumerate(done)
-        if i not in continued
-        and not v.failed
-        and (
-            _promising(v, refit, st)
-            or (v.stopped and v.last_decrease() >= st.continue_decrease and time_left)
-        )
-    ]
-    return sorted(going, key=lambda i: done[i].chi2_per_dof())[: max(2 - len(continued), 0)]
-
-
-def _goes_on_at_once(v: Verified, refit: Verified, st: DiagnosisSettings) -> bool:
-    """A verification that went most of the way but not to the explained level goes on as
-    soon as it finishes (:func:`_to_continue` would take it after the stage in any case): on
-    two processors its continuation then runs beside the stage's last verification, not
-    after it."""
-    return not v.failed and _promising(v, refit, st) and v.rms_over_noise() > st.explained_rms
-
-
 def _merge(done: list[Verified], i: int, v: Verified) -> None:
     """Take the continuation ``v`` of ``done[i]`` if it is better, with the history of both."""
     if v.chi2_per_dof() < done[i].chi2_per_dof():
         v.seconds += done[i].seconds
         v.cpu_seconds += done[i].cpu_seconds
+        v.evaluations += done[i].evaluations
         v.history = done[i].history + v.history
         done[i] = v
 
@@ -406,8 +329,8 @@ def _other_laws(
         and f.candidate.law != cand.law
         and f.candidate not in tried
     ]
-    near = sorted(there, key=lambda f: f.bic)[: n + 1]
-    return sorted(near, key=lambda f: (f.candidate.n_params, f.bic))[:n]
+    keep = simplest_of_next([f.candidate.n_params for f in there], [f.bic for f in there], n)
+    return [there[i] for i in keep]
 
 
 def _linear_shortlist(base: LinearFit | None, fits: list[LinearFit], st: DiagnosisSettings):
@@ -490,15 +413,18 @@ class _Verifying:
     origin: list
     done: list[Verified]
     refit: Verified
-    bar: float  # a candidate no better than the model recalibrated without it stops early
-    st: DiagnosisSettings
+    policy: Policy
 
-    def left(self) -> float:
-        # processor time, so what a diagnosis does does not depend on the machine's load
-        return self.st.time_budget_s - sum(v.cpu_seconds for v in self.done)
+    @property
+    def st(self) -> DiagnosisSettings:
+        return self.policy.st
 
-    def unexplained(self) -> bool:
-        return _best_rms(self.done) > self.st.explained_rms
+    @property
+    def bar(self) -> float:
+        return self.policy.bar
+
+    def summaries(self) -> list[FitSummary]:
+        return [FitSummary.of(v) for v in self.done]
 
 
 def diagnose(
@@ -570,10 +496,10 @@ def diagnose(
             timings=timings,
             settings=st,
         )
-        if refit.rms_over_noise() <= st.adequate_rms:
+        if Policy(st, FitSummary.of(refit)).adequate():
             timings["total_s"] = time.perf_counter() - t0
             return result
-        if _rescreen(refit, cmp, st):
+        if Policy(st, FitSummary.of(refit)).rescreen(cmp.rms_over_noise):
             _screen_again(sc, result, data, evidence, jobs, ex, say, progress)
         t2 = time.perf_counter()
         run, further = _first_verifications(sc, jobs, ex, say)
@@ -614,17 +540,17 @@ def _screen_step(
     # the screen's first pass shared with a worker; the recalibration and the linear
     # test's candidates on the workers meanwhile
     mine, theirs = (nonlinear[0::2], nonlinear[1::2]) if ex is not None else (nonlinear, [])
-    share = _Later(
+    share = Deferred(
         ex,
         screen_pass,
         ScreenJob(jobs.text, jobs.source, jobs.path, tuple(theirs), st.n_harmonics, st.n_time),
     )
-    refit_job = _Later(ex, run_verify, jobs.verify(None))
+    refit_job = Deferred(ex, run_verify, jobs.verify(None))
     lin_jobs = []
     if jobs.linear_run is not None:
         lin = [c for c in cands if c.law.kind in ("mass", "linear_spring", "joint_spring")]
         lin_jobs = [
-            _Later(ex, run_linear_job, LinearJob(jobs.text, jobs.source, jobs.linear_run, c))
+            Deferred(ex, run_linear_job, LinearJob(jobs.text, jobs.source, jobs.linear_run, c))
             for c in [None, *lin]
         ]
     screen = _screen_from(model, data, st, pred)
@@ -639,7 +565,11 @@ def _screen_step(
     # unmeasured DOFs) and the workers finish the linear test
     lead = _lead(fits)
     early = []
-    if ex is not None and lead is not None and not _settled(refit, cmp, st):
+    if (
+        ex is not None
+        and lead is not None
+        and not Policy(st, FitSummary.of(refit)).settled(cmp.rms_over_noise)
+    ):
         early = [
             ex.submit(
                 run_verify,
@@ -658,7 +588,7 @@ def _screen_step(
     )
 
 
-def _linear_results(lin_jobs: list[_Later], say) -> tuple[LinearFit | None, list[LinearFit]]:
+def _linear_results(lin_jobs: list[Deferred], say) -> tuple[LinearFit | None, list[LinearFit]]:
     """The linear test's recalibrated model and its candidates, best first."""
     if not lin_jobs:
         return None, []
@@ -706,8 +636,8 @@ def _first_verifications(sc: _Screened, jobs: _Jobs, ex, say) -> tuple[_Verifyin
     n_lead = min(2, len(first))
     origin: list = [*first[:n_lead], *linear_first, *first[n_lead:]]
     essential = len(origin) - len(first) + min(3, len(first))
-    # a candidate no better than the model recalibrated without it stops early
-    bar = refit.chi2_per_dof()
+    policy = Policy(st, FitSummary.of(refit))
+    bar = policy.bar
     vjobs = [
         dataclasses.replace(
             jobs.verify(o.candidate, start_toml=o.model_toml)
@@ -719,14 +649,12 @@ def _first_verifications(sc: _Screened, jobs: _Jobs, ex, say) -> tuple[_Verifyin
     ]
 
     def enough(vs: list[Verified]) -> bool:
-        # one at the noise, or the processor time of the stage spent
-        spent = sum(v.cpu_seconds for v in vs)
-        return any(v.rms_over_noise() <= st.adequate_rms for v in vs) or (spent >= st.time_budget_s)
+        return policy.enough([FitSummary.of(v) for v in vs])
 
     gone_on: list[int] = []
 
     def follow(i: int, v: Verified) -> VerifyJob | None:
-        if len(gone_on) >= 2 or not _goes_on_at_once(v, refit, st):
+        if len(gone_on) >= 2 or not policy.goes_on_at_once(FitSummary.of(v)):
             return None
         gone_on.append(i)
         say("continue", {"n": 1, "rms_over_noise": v.rms_over_noise()})
@@ -739,35 +667,33 @@ def _first_verifications(sc: _Screened, jobs: _Jobs, ex, say) -> tuple[_Verifyin
     for i, v in further.items():
         _merge(done, i, v)
     say("verified", {"n": len(done), "best_rms": _best_rms(done)})
-    return _Verifying(origin[: len(ran)], done, refit, bar, st), list(further)
+    return _Verifying(origin[: len(ran)], done, refit, policy), list(further)
 
 
 def _continue_falling(run: _Verifying, further: list[int], jobs: _Jobs, ex, say) -> None:
-    """The fits still falling fast go on (:func:`_to_continue`; those that went most of the
-    way went on as soon as they finished)."""
-    going = (
-        _to_continue(run.done, run.refit, run.st, run.left() > 0, further)
-        if run.unexplained()
-        else []
-    )
+    """The fits still falling fast go on (:meth:`Policy.to_continue`; those that went most of
+    the way went on as soon as they finished)."""
+    going = run.policy.to_continue(run.summaries(), further)
     if going:
         say("continue", {"n": len(going)})
-    cont = [_Later(ex, run_verify, jobs.go_on(run.origin[i].candidate, run.done[i])) for i in going]
+    cont = [
+        Deferred(ex, run_verify, jobs.go_on(run.origin[i].candidate, run.done[i])) for i in going
+    ]
     for i, p in zip(going, cont, strict=True):
         _merge(run.done, i, p.result())
 
 
 def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say) -> None:
-    """From the best: at a measured point, if it explains the misfit or went most of the way,
-    its law at the next points by the screen, from the best's fit (the screen can rank a
-    strong effect's true point third or fourth, and a neighbour can explain it nearly to the
-    noise: the contact at the point next to the second stop reached 1.27 x noise in one run,
-    1.66 in another, the stop's own point 1.01); at an unmeasured location, if the best is not
-    at the noise, the next laws there."""
+    """From the best, where :meth:`Policy.walk_to` sends it: its law at the next measured
+    points by the screen, from the best's fit, or the next laws at its unmeasured location
+    (docs/diagnosis.md, the rules table)."""
     done, origin = run.done, run.origin
     ranked = [i for i in np.argsort([v.chi2_per_dof() for v in done]) if not done[i].failed]
-    lead = origin[ranked[0]] if ranked else None
-    walk_to = _walk_to(lead, done[ranked[0]] if ranked else None, run.refit, run.st)
+    if not ranked:
+        return
+    lead = origin[ranked[0]]
+    kind = lead.candidate.location.kind if isinstance(lead, ScreenFit) else None
+    walk_to = run.policy.walk_to(kind, FitSummary.of(done[ranked[0]]))
     if not walk_to:
         return
     tried = [o.candidate for o in origin]
@@ -779,7 +705,7 @@ def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say) -> Non
         walk = [(f, f.values, f.known) for f in laws]
         say("other laws", {"n": len(walk)})
     more = [
-        _Later(
+        Deferred(
             ex,
             run_verify,
             dataclasses.replace(jobs.verify(f.candidate, values, known), give_up_chi2=run.bar),
@@ -792,9 +718,11 @@ def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say) -> Non
 
 def _second_picks(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say) -> None:
     """If none explains it, while time is left, the short list's second stage."""
-    if not (run.unexplained() and sc.second and run.left() > 0):
+    if not run.policy.second_stage(run.summaries(), len(sc.second)):
         return
-    more = [_Later(ex, run_verify, jobs.verify(f.candidate, f.values, f.known)) for f in sc.second]
+    more = [
+        Deferred(ex, run_verify, jobs.verify(f.candidate, f.values, f.known)) for f in sc.second
+    ]
     run.done += [p.result() for p in more]
     run.origin += sc.second
     say("verified", {"n": len(run.done), "best_rms": _best_rms(run.done)})
@@ -805,17 +733,9 @@ def _restart_best(run: _Verifying, jobs: _Jobs, ex, say) -> None:
     minimum of a strong effect), not for one that explains little; a restart is kept where it
     fits better."""
     st, done = run.st, run.done
-    order = np.argsort([v.chi2_per_dof() for v in done])
-    best_rms = done[order[0]].rms_over_noise() if done else math.inf
-    if not (
-        st.n_starts > 0
-        and best_rms > st.explained_rms
-        and done
-        and _promising(done[order[0]], run.refit, st)
-        and run.left() > 0
-    ):
+    again = run.policy.restarts(run.summaries())
+    if not again:
         return
-    again = [int(i) for i in order[:2] if not done[i].failed]
     say("restart", {"n": len(again)})
     retry = []
     for i in again:
@@ -824,21 +744,22 @@ def _restart_best(run: _Verifying, jobs: _Jobs, ex, say) -> None:
             job = jobs.verify(o.candidate, start_toml=o.model_toml, n_starts=st.n_starts)
         else:
             job = jobs.verify(o.candidate, o.values, o.known, n_starts=st.n_starts)
-        retry.append(_Later(ex, run_verify, job))
+        retry.append(Deferred(ex, run_verify, job))
     for i, p in zip(again, retry, strict=True):
         v = p.result()
         if v.chi2_per_dof() < done[i].chi2_per_dof():
             v.seconds += done[i].seconds
+            v.evaluations += done[i].evaluations
             done[i] = v
 
 
 def _conclude(result: Diagnosis, model: Model, data, run: _Verifying) -> None:
     """The ranking, the verdict and, for a group, the measurement that would separate it."""
-    st = run.st
-    ranking, model_bic = _rank(model, run.refit, run.origin, run.done, st)
-    verdict = "unexplained"
-    if ranking and ranking[0].rms_over_noise <= st.explained_rms and ranking[0].delta_bic < 0:
-        verdict = "explained"
+    ranking, model_bic = _rank(model, run.refit, run.origin, run.done, run.st)
+    best = ranking[0] if ranking else None
+    verdict = run.policy.verdict(
+        None if best is None else best.rms_over_noise, None if best is None else best.delta_bic
+    )
     result.verdict, result.ranking, result.model_bic = verdict, ranking, model_bic
     if verdict == "explained" and len(result.group) > 1:
         from analysis.diagnosis.discriminate import discriminate
@@ -877,18 +798,15 @@ def _rank(model: Model, refit: Verified, origin: list, done: list[Verified], st)
         scored.append((bic, o, v))
     if not scored:
         return [], model_bic
+    # within a tie the fit orders (BIC already charges each parameter): docs/diagnosis.md, Ties
     scored.sort(key=lambda t: t[0])
-    best = scored[0][0]
-    # within a tie the fit orders (BIC already charges each parameter): a rule that ignores
-    # the data (fewest parameters first) would pick among equals by construction
-    tied = [t for t in scored if t[0] - best <= st.tie_bic]
-    rest = [t for t in scored if t[0] - best > st.tie_bic]
+    groups = tie_groups([t[0] for t in scored], st.tie_bic)
     ranked = []
-    for i, (bic, o, v) in enumerate(tied + rest):
+    for i, ((bic, o, v), group) in enumerate(zip(scored, groups, strict=True)):
         ranked.append(
             RankedCandidate(
                 rank=i + 1,
-                group=1 if i < len(tied) else i - len(tied) + 2,
+                group=group,
                 candidate=o.candidate,
                 bic=bic,
                 delta_bic=bic - model_bic,

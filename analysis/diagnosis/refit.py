@@ -53,6 +53,10 @@ class Refit:
         Metric of every start tried (``inf`` where the model did not converge).
     lm : LeastSquaresResult
     seconds : float
+    evaluations : int
+        Evaluations of the objective (the balance on every fitted step, with or without its
+        Jacobian): the start model's, the starts' and Levenberg-Marquardt's, over every pass.
+        The work the fit did, the same however busy the machine is.
     """
 
     model: Model
@@ -64,6 +68,7 @@ class Refit:
     start_costs: list[float] = field(default_factory=list)
     lm: LeastSquaresResult | None = None
     seconds: float = 0.0
+    evaluations: int = 0
 
 
 def _objective(model, data, names, rows, n_harmonics, n_time) -> FRFObjective:
@@ -87,73 +92,137 @@ def _reweight(obj: FRFObjective, sigma: np.ndarray) -> None:
     obj._weight = np.sqrt(2) / obj.sigma
 
 
-class _OutOfTime(Exception):
-    """The fit's time is up (raised from the iteration callback)."""
-
-
-class _GiveUp(_OutOfTime):
-    """The fit stays worse than the bar it was given (raised from the iteration callback)."""
-
+#: Why a fit stopped before Levenberg-Marquardt's own criteria (its result's ``message``).
+OUT_OF_TIME = "stopped: the time allowed is up"
+NO_BETTER = "stopped: no better than the bar it was given"
+REWEIGH = "reweighted"
 
 #: An iteration that lowers the metric by less than this share has stalled.
 STALL = 0.05
 
 
-class _Reweigh(Exception):
-    """The metric fell far below the one the weights were computed at (from the callback)."""
+@dataclass(frozen=True)
+class StopRule:
+    """When a fit stops before Levenberg-Marquardt's own criteria (see :func:`refit`).
+
+    Parameters
+    ----------
+    deadline : float, optional
+        This process's processor time (``time.process_time()``) past which the fit stops.
+    give_up_chi2 : float, optional
+        The chi-square per degree of freedom a fit that is no longer falling fast must get
+        below (``refit``'s ``give_up_chi2``).
+    reweigh_drop : float, optional
+        Stop for the weights to be recomputed at a stall this many times below the start's
+        metric (``refit``'s ``reweight_drop``).
+    """
+
+    deadline: float | None = None
+    give_up_chi2: float | None = None
+    reweigh_drop: float | None = None
+
+    def out_of_time(self) -> bool:
+        return self.deadline is not None and time.process_time() > self.deadline
+
+    def check(self, seen: Sequence[Mapping], dof: int) -> str | None:
+        """Why the fit stops after the last of its iterations ``seen`` (Levenberg-Marquardt's
+        history entries, with ``iteration`` and ``cost``; ``dof`` its degrees of freedom), or
+        None to go on. Never at the start point."""
+        h = seen[-1]
+        if h["iteration"] < 1:
+            return None
+        if self.out_of_time():
+            return OUT_OF_TIME
+        stalled = h["cost"] > (1 - STALL) * seen[-2]["cost"]
+        if (
+            self.reweigh_drop is not None
+            and stalled
+            and h["cost"] * self.reweigh_drop < seen[0]["cost"]
+        ):
+            return REWEIGH
+        if self.give_up_chi2 is not None:
+            # still above the bar and no longer falling fast: hopeless two iterations in, or
+            # one when at twice the bar (an iteration can take a verification's whole time)
+            bar = self.give_up_chi2 if h["iteration"] >= 2 else 2 * self.give_up_chi2
+            if 2 * h["cost"] / dof > bar and h["cost"] > 0.5 * seen[-2]["cost"]:
+                return NO_BETTER
+        return None
 
 
-def _watch(seen: list, progress, deadline: float | None, give_up, drop, h: dict) -> None:
-    seen.append(h)
-    if progress:
-        progress("lm", h)
-    if deadline is not None and time.process_time() > deadline and h["iteration"] > 0:
-        raise _OutOfTime
-    if (
-        drop is not None
-        and h["iteration"] >= 1
-        and h["cost"] * drop < seen[0]["cost"]
-        and h["cost"] > (1 - STALL) * seen[-2]["cost"]
-    ):
-        raise _Reweigh
-    if give_up is not None and h["iteration"] >= 1 and len(seen) >= 2:
-        # still above the bar and no longer falling fast: hopeless two iterations in, or one
-        # when at twice the bar (an iteration can take a verification's whole time)
-        bar, dof = give_up
-        above = 2 * h["cost"] / dof() / (bar if h["iteration"] >= 2 else 2 * bar)
-        if above > 1 and h["cost"] > 0.5 * seen[-2]["cost"]:
-            raise _GiveUp
+class _Stop(Exception):
+    """A :class:`StopRule`'s reason, carried out of :func:`least_squares_lm` (which takes no
+    stop criterion) and caught in :func:`_lm_until` only."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
 
 
 class _Remember:
     """The objective, remembering its residuals at the last point with a Jacobian (the
-    iterate Levenberg-Marquardt accepted last), and stopping the fit once past ``deadline``
-    (an evaluation far from the measurement, with steps that need sub-steps, can take longer
-    than a whole fit near it). Times are this process's processor time."""
+    iterate Levenberg-Marquardt accepted last), and stopping the fit at an evaluation once
+    the rule's deadline is past (an evaluation far from the measurement, with steps that need
+    sub-steps, can take longer than a whole fit near it)."""
 
-    def __init__(self, obj: FRFObjective, deadline: float | None = None) -> None:
-        self.obj, self.x, self.r, self.deadline = obj, None, None, deadline
+    def __init__(self, obj: FRFObjective, rule: StopRule = StopRule()) -> None:
+        self.obj, self.x, self.r, self.rule = obj, None, None, rule
+        self.calls = 0  # evaluations, with or without the Jacobian
 
     def __call__(self, x, want_jac):
-        late = self.deadline is not None and time.process_time() > self.deadline
-        if late and self.x is not None:
-            raise _OutOfTime
+        if self.x is not None and self.rule.out_of_time():
+            raise _Stop(OUT_OF_TIME)
+        self.calls += 1
         r, J = self.obj(x, want_jac)
         if want_jac:
             self.x, self.r = np.array(x, float), r
         return r, J
 
 
-def _stopped(
-    fun: _Remember, seen: list[dict], message: str = "stopped: the time allowed is up"
+def _lm_until(
+    obj: FRFObjective, theta, rule: StopRule, max_iterations: int, ftol: float, progress
 ) -> LeastSquaresResult:
-    """The result at the last accepted iterate of a fit stopped for time (no covariance: a
-    stopped fit's means nothing, and a Jacobian costs a full sensitivity solve)."""
+    """Bounded Levenberg-Marquardt from ``theta`` until its own criteria or ``rule`` stop it;
+    the result's ``message`` says which (a stopped fit's is one of :data:`OUT_OF_TIME`,
+    :data:`NO_BETTER`, :data:`REWEIGH`)."""
+    space = obj.space
+    fun = _Remember(obj, rule)
+    seen: list[dict] = []
+
+    def watch(h: dict) -> None:
+        seen.append(h)
+        if progress:
+            progress("lm", h)
+        reason = rule.check(seen, max(fun.r.size - space.size, 1))
+        if reason is not None:
+            raise _Stop(reason)
+
+    try:
+        return least_squares_lm(
+            fun,
+            theta,
+            bounds=space.theta_bounds(),
+            max_iterations=max_iterations,
+            ftol=ftol,
+            callback=watch,
+        )
+    except _Stop as stop:
+        return _stopped(fun, seen, stop.reason)
+
+
+def _stopped(fun: _Remember, seen: list[dict], message: str) -> LeastSquaresResult:
+    """The result at the last accepted iterate of a stopped fit (no covariance: a stopped
+    fit's means nothing, and a Jacobian costs a full sensitivity solve)."""
     x = np.array(seen[-1]["x"])
-    r = fun.r if fun.x is not None and np.array_equal(fun.x, x) else fun.obj(x, False)[0]
+    if fun.x is not None and np.array_equal(fun.x, x):
+        r = fun.r
+    else:
+        fun.calls += 1
+        r = fun.obj(x, False)[0]
     cov = np.full((x.size, x.size), np.nan)
+    it = seen[-1]["iteration"]
+    # nfev counts every evaluation, as least_squares_lm's does; njev is not tracked here
     return LeastSquaresResult(
-        x, 0.5 * float(r @ r), r, None, cov, 0, 0, seen[-1]["iteration"], False, message, list(seen)
+        x, 0.5 * float(r @ r), r, None, cov, fun.calls, 0, it, False, message, list(seen)
     )
 
 
@@ -239,10 +308,9 @@ def refit(
         Recompute the weights when an iteration stalls (lowers the metric by less than
         :data:`STALL`) at a metric ``reweight_drop`` times or more below the one they were
         computed at (the model has moved far from the start whose tangents they hold), and go
-        on from there with the iterations and processor time left; again at each such stall.
-        Levenberg-Marquardt on stale weights stalls far above the noise: the clamp's friction
-        went 823 -> 9.1 -> 4.2 -> 3.6 -> 3.4 and stayed there; with the weights recomputed
-        at 9.1 it stalled at 3.35 too, at 3.4 it reached 1.16 in one iteration.
+        on from there with the iterations and processor time left; again at each such stall
+        (Levenberg-Marquardt on stale weights stalls far above the noise: docs/diagnosis.md,
+        the rules table).
 
     Returns
     -------
@@ -280,20 +348,23 @@ def refit(
     p0 = np.array([_current(model, n) for n in names])
     thetas = _start_thetas(space, names, p0, starts, distributions, n_random_starts, seed)
     whole = good.size == rows.size
-    costs = _start_costs(obj, thetas, p0, base if whole else None, progress)
+    costs, n_start_evaluations = _start_costs(obj, thetas, p0, base if whole else None, progress)
     deadline = None if max_seconds is None else time.process_time() + max_seconds
-    best, reweigh = _lm_from_starts(
+    best, reweigh, n_lm_evaluations = _lm_from_starts(
         obj,
         thetas,
         costs,
         n_lm_starts,
-        _LMLimits(max_iterations, ftol, deadline, give_up_chi2),
-        reweight_drop if n_lm_starts == 1 else None,
+        StopRule(deadline, give_up_chi2, reweight_drop if n_lm_starts == 1 else None),
+        max_iterations,
+        ftol,
         progress,
     )
     if len(thetas) == 1 and best is not None and best.history:
         costs = np.array([best.history[0]["cost"]])
     out = _as_refit(model, names, space, best, costs, t0)
+    # the start model's prediction, the starts' metrics, Levenberg-Marquardt's evaluations
+    out.evaluations = 1 + n_start_evaluations + n_lm_evaluations
     left = None if deadline is None else deadline - time.process_time()
     if not reweigh or best.nit >= max_iterations or (left is not None and left <= 0):
         return out
@@ -348,11 +419,13 @@ def _start_thetas(space, names, p0, starts, distributions, n_random_starts: int,
     return np.clip(np.array([space.to_theta(c) for c in candidates]), lo, hi)
 
 
-def _start_costs(obj: FRFObjective, thetas, p0, base, progress) -> np.ndarray:
-    """The metric at each start; ``base`` is the start model's prediction when it holds on
-    every fitted step (the first start's metric without a solve)."""
+def _start_costs(obj: FRFObjective, thetas, p0, base, progress) -> tuple[np.ndarray, int]:
+    """The metric at each start and the evaluations that took; ``base`` is the start model's
+    prediction when it holds on every fitted step (the first start's metric without a
+    solve)."""
     space = obj.space
     costs = []
+    evaluations = 0
     if len(thetas) == 1:
         costs = [np.nan]  # one start: its metric is Levenberg-Marquardt's first evaluation
     else:
@@ -365,60 +438,39 @@ def _start_costs(obj: FRFObjective, thetas, p0, base, progress) -> np.ndarray:
                 costs.append(obj.cost_of(base))  # the start model itself, predicted above
             else:
                 costs.append(obj.cost(th))
+                evaluations += 1
             if progress:
                 progress("start", {"index": i, "n": len(thetas), "cost": costs[-1]})
     out = np.array(costs)
     if len(thetas) > 1 and not np.isfinite(out).any():
         raise RuntimeError("no start gives a converged model response on the fitted steps")
-    return out
-
-
-@dataclasses.dataclass(frozen=True)
-class _LMLimits:
-    """When Levenberg-Marquardt stops: iterations, relative fall, the processor-time
-    deadline and the chi-square per degree of freedom it must get below (see :func:`refit`)."""
-
-    max_iterations: int
-    ftol: float
-    deadline: float | None
-    give_up_chi2: float | None
+    return out, evaluations
 
 
 def _lm_from_starts(
-    obj: FRFObjective, thetas, costs, n_lm_starts: int, lim: _LMLimits, drop, progress
-) -> tuple[LeastSquaresResult | None, bool]:
-    """Levenberg-Marquardt from the ``n_lm_starts`` best starts; the best fit, and whether it
-    stopped for its weights to be recomputed."""
-    space = obj.space
-    lo, hi = space.theta_bounds()
+    obj: FRFObjective,
+    thetas,
+    costs,
+    n_lm_starts: int,
+    rule: StopRule,
+    max_iterations: int,
+    ftol: float,
+    progress,
+) -> tuple[LeastSquaresResult | None, bool, int]:
+    """Levenberg-Marquardt from the ``n_lm_starts`` best starts; the best fit, whether it
+    stopped for its weights to be recomputed, and the evaluations of every start's fit."""
     best: LeastSquaresResult | None = None
     reweigh = False
+    evaluations = 0
     for k in np.argsort(costs)[:n_lm_starts]:
         if len(thetas) > 1 and not np.isfinite(costs[k]):
             continue
-        seen: list[dict] = []
-        fun = _Remember(obj, lim.deadline)
-        bar = None
-        if lim.give_up_chi2 is not None:
-            bar = (lim.give_up_chi2, lambda fun=fun: max(fun.r.size - space.size, 1))
-        try:
-            res = least_squares_lm(
-                fun,
-                thetas[k],
-                bounds=(lo, hi),
-                max_iterations=lim.max_iterations,
-                ftol=lim.ftol,
-                callback=functools.partial(_watch, seen, progress, lim.deadline, bar, drop),
-            )
-        except _Reweigh:
-            res, reweigh = _stopped(fun, seen, "reweighted"), True
-        except _GiveUp:
-            res = _stopped(fun, seen, "stopped: no better than the bar it was given")
-        except _OutOfTime:
-            res = _stopped(fun, seen)
+        res = _lm_until(obj, thetas[k], rule, max_iterations, ftol, progress)
+        reweigh = reweigh or res.message == REWEIGH
+        evaluations += res.nfev
         if best is None or res.cost < best.cost:
             best = res
-    return best, reweigh
+    return best, reweigh, evaluations
 
 
 def _as_refit(model: Model, names, space, best: LeastSquaresResult, costs, t0: float) -> Refit:
@@ -462,6 +514,7 @@ def _joined(out: Refit, nxt: Refit, nit: int, t0: float) -> Refit:
         history=[{**h, "pass": 0} for h in out.history] + later,
         start_costs=out.start_costs,
         seconds=time.perf_counter() - t0,
+        evaluations=out.evaluations + nxt.evaluations,
     )
 
 
@@ -470,6 +523,7 @@ def _reweighted(fit: Refit, again: Callable[..., Refit], passes: int, max_iterat
     from the model's values with the weights recomputed there."""
     t0 = time.perf_counter() - fit.seconds
     fits, own = [fit], []
+    evaluations = fit.evaluations
     for k in range(1, passes + 2):
         # one start, the last fit's values: its first metric is the last fit's own one
         last = k > passes
@@ -479,6 +533,7 @@ def _reweighted(fit: Refit, again: Callable[..., Refit], passes: int, max_iterat
             log.info("reweighting stopped after pass %d: %s", k - 1, exc)
             own.append(np.inf)
             break
+        evaluations += nxt.evaluations
         own.append(2 * nxt.start_costs[0] / max(nxt.n_residuals - len(nxt.parameters), 1))
         if last:
             break
@@ -490,5 +545,9 @@ def _reweighted(fit: Refit, again: Callable[..., Refit], passes: int, max_iterat
         offset = history[-1]["iteration"]
     log.info("reweighted fits: own chi2/dof %s, kept pass %d", own, kept)
     return dataclasses.replace(
-        fits[kept], history=history, start_costs=fit.start_costs, seconds=time.perf_counter() - t0
+        fits[kept],
+        history=history,
+        start_costs=fit.start_costs,
+        seconds=time.perf_counter() - t0,
+        evaluations=evaluations,
     )

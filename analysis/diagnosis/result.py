@@ -177,6 +177,7 @@ class RankedCandidate:
             "rms_over_noise": self.rms_over_noise,
             "parameters": self.verified.parameters,
             "seconds": self.verified.seconds,
+            "evaluations": self.verified.evaluations,
         }
 
 

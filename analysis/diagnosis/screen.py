@@ -204,6 +204,24 @@ class _Frame:
     R_o: np.ndarray  # (n, K, nD, 1 + nD): R at the measured orders (every candidate's fit)
 
 
+@dataclass
+class _States:
+    """The measured-order states of one force estimate (:meth:`Screen.states`) and what every
+    fit at its location shares, computed once: the whitening at the data's states (``S0``),
+    the start phasors (``X_init``), each incidence's state map (``maps``) and the model
+    elements' forces at the data's states (``known``, by element)."""
+
+    U: np.ndarray  # (n, K, nD) states at the measured orders
+    P: np.ndarray  # (n, K, nD, C) d U / d (weighted data)
+    W: np.ndarray  # (n, K, C) weights
+    Y: np.ndarray  # (n, K, C) the data
+    grouped: bool
+    S0: np.ndarray | None = None
+    X_init: np.ndarray | None = None
+    maps: dict = field(default_factory=dict)
+    known: dict = field(default_factory=dict)
+
+
 class Screen:
     """The screen of candidates against one file, at a calibrated model.
 
@@ -374,7 +392,7 @@ class Screen:
             rows.append(r)
         return np.array(rows).reshape(-1, nD)
 
-    def states(self, fr: _Frame, B_loc: np.ndarray | None, key) -> dict:
+    def states(self, fr: _Frame, B_loc: np.ndarray | None, key) -> _States:
         """Force estimate and measured-order states with forces at the model's elements and
         at the incidences ``B_loc`` (a group larger than the sensors can resolve acts as one
         force distributed like the anchor's displacements there)."""
@@ -415,7 +433,7 @@ class Screen:
             ghat.append(g)
             out_U[:, kk] = Rd * self._F[self.rows, kk][:, None] + np.einsum("nil,nl->ni", RL, g)
             P_rows.append(np.einsum("nil,nlc->nic", RL, pinv))  # complex (n, nD, C)
-        st = {"U": out_U, "P": np.stack(P_rows, axis=1), "W": W, "Y": Y, "grouped": grouped}
+        st = _States(out_U, np.stack(P_rows, axis=1), W, Y, grouped)
         self._states[key] = st
         return st
 
@@ -486,7 +504,7 @@ class Screen:
         elif law.nonlinear:
             # the clearance is searched with a jumping force sampled (fast), then fitted exactly
             name = law.nonlinear[0]
-            Xi = np.einsum("nkj,lj->nkl", st["U"], B)
+            Xi = np.einsum("nkj,lj->nkl", st.U, B)
             u = np.einsum("tk,nkl->ntl", self._basis.E[:, self._basis.order_k], Xi).real
             side = law.options.get("side")
             amp = float(np.abs(u).max() if side is None else max((side * u).max(), 1e-12))
@@ -738,20 +756,20 @@ class Screen:
         basis = {name: gain[:, :, None] * X} if want_basis else None
         return f, Jm, basis
 
-    def _initial_states(self, fr: _Frame, st: dict) -> np.ndarray:
+    def _initial_states(self, fr: _Frame, st: _States) -> np.ndarray:
         """Phasors at D: the measured orders from the data, the mean and higher harmonics
         from the model's own elements at those states (fixed point; the anchor's solution may
         sit on another branch than the test)."""
         bs = self._basis
-        if "X_init" not in st and st is not self.states(fr, None, (id(fr), None)):
+        if st.X_init is None and st is not self.states(fr, None, (id(fr), None)):
             # the unmeasured harmonics follow the model's elements, whose states the sensors
             # give whatever the location: take them from the model's own force estimate
             X = self._initial_states(fr, self.states(fr, None, (id(fr), None)))
-            X[:, bs.order_k] = st["U"]
-            st["X_init"] = X
-        if "X_init" not in st:
+            X[:, bs.order_k] = st.U
+            st.X_init = X
+        if st.X_init is None:
             X = fr.X0.copy()
-            X[:, bs.order_k] = st["U"]
+            X[:, bs.order_k] = st.U
             other = bs.other
             fine = _Basis(bs.H, 1024, bs.order_k)
             for _ in range(INITIAL_PASSES):
@@ -765,8 +783,8 @@ class Screen:
                     u, v = fine.time(Xi, fr.omega)  # finely sampled: no per-step loop
                     g += fine.phasors(element.evaluate(u, v).f) * row[None, None, :]
                 X[:, other] = np.einsum("nhij,nhj->nhi", fr.R[:, other, :, 1:], g[:, other])
-            st["X_init"] = X
-        return st["X_init"].copy()
+            st.X_init = X
+        return st.X_init.copy()
 
     def _fit(self, fr, st, cand, B_loc, nonlinear: dict, param=None, n_iterations=None):
         """Alternate: whitening and unmeasured harmonics at the current values, then the
@@ -784,20 +802,20 @@ class Screen:
         if joint:
             theta["k_joint_delta"] = 0.0
         known = {mp: el.params[ep] for el, _, _, pmap in fr.known for mp, ep in pmap.items()}
-        W = st["W"]
+        W = st.W
         Wr = np.stack([W, W], axis=2).reshape(n, -1)  # (n, 2KC)
         drive = fr.R_o[:, :, :C, 0] * self._F[self.rows][:, :, None]
         other = bs.other
         incid = _incidences(fr, law, joint, B_loc)
         # per incidence: response at the sensors to a unit force (real) and state map
-        maps = st.setdefault("maps", {})
+        maps = st.maps
         rss = np.inf
         its = self.n_iterations if n_iterations is None else n_iterations
         for it in range(its + 1):
             # at the data's states the candidate's coefficients start at zero, so its force
             # and Jacobian vanish and the whitening is the model's own elements': computed
             # once per location, shared by every law there
-            whitened = it == 0 and "S0" in st
+            whitened = it == 0 and st.S0 is not None
             lin = _Forces(
                 np.zeros((n, bs.H + 1, len(fr.dofs)), complex),
                 None if whitened else np.zeros((n, 2 * K * C, 2 * K * C)),
@@ -818,12 +836,12 @@ class Screen:
                 # unmeasured harmonics follow the laws: U_h = R_DD(h W) g_h
                 X[:, other] = np.einsum("nhij,nhj->nhi", fr.R[:, other, :, 1:], lin.g[:, other])
             if whitened:
-                S = st["S0"]
+                S = st.S0
             else:
                 lin.M *= Wr[:, :, None]
                 S = np.linalg.inv(np.eye(2 * K * C)[None] - lin.M)
                 if it == 0:
-                    st["S0"] = S
+                    st.S0 = S
             Am, y0 = self._whitened_system(fr, st, S, W, drive, lin, params)
             cur = np.array(
                 [
@@ -837,13 +855,13 @@ class Screen:
                 break
         return rss, 2 * K * C * n, theta, known
 
-    def _state_map(self, fr: _Frame, st: dict, maps: dict, row: np.ndarray):
+    def _state_map(self, fr: _Frame, st: _States, maps: dict, row: np.ndarray):
         """Response at the sensors to a unit force at an incidence, and its state map."""
         key = row.tobytes()
         if key not in maps:
             C = self.n_channels
             Rr = np.einsum("nkcd,d->nkc", fr.R_o[:, :, :C, 1:], row)[:, :, :, None]
-            Pr = np.einsum("d,nkdc->nkc", row, st["P"])[:, :, None, :]
+            Pr = np.einsum("d,nkdc->nkc", row, st.P)[:, :, None, :]
             maps[key] = (_realify(Rr), _realify(Pr))
         return maps[key]
 
@@ -852,13 +870,12 @@ class Screen:
         at the data's states, which every law at the location shares); its linear parameters'
         columns added to ``lin``."""
         th = {ep: known[mp] for mp, ep in pmap.items()}
-        ck = ("known", id(st), i)
-        if it == 0 and ck in st:
-            f, Jm, basis = st[ck]
+        if it == 0 and i in st.known:
+            f, Jm, basis = st.known[i]
         else:
             f, Jm, basis = self._law_eval(fr, element, Xi, th, True)
             if it == 0:
-                st[ck] = (f, Jm, basis)
+                st.known[i] = (f, Jm, basis)
         for mp, ep in pmap.items():
             lin.columns.append(basis[ep] @ rows)
             lin.names.append(("known_delta" if ep == "gap" else "known", mp))
@@ -898,7 +915,7 @@ class Screen:
         Ro = fr.R_o[:, :, :C, 1:]
         cols = np.stack([lin.g[:, bs.order_k], *(c[:, bs.order_k] for c in lin.columns)], -1)
         r = np.matmul(Ro, cols) * W[..., None]  # (n, K, C, 1 + columns)
-        r[..., 0] = (st["Y"] - drive) * W - r[..., 0]
+        r[..., 0] = (st.Y - drive) * W - r[..., 0]
         fo = np.concatenate([self._F[self.rows][:, :, None], lin.g[:, bs.order_k]], axis=2)
         extra = []
         for name in params:

@@ -137,6 +137,9 @@ class Verified:
     message : str
     cpu_seconds : float
         Processor time of the verification (its process's).
+    evaluations : int
+        Evaluations of the objective by its recalibration
+        (:attr:`~analysis.diagnosis.refit.Refit.evaluations`): the work it did.
     """
 
     candidate: Candidate | None
@@ -149,6 +152,7 @@ class Verified:
     seconds: float = 0.0
     message: str = ""
     cpu_seconds: float = 0.0
+    evaluations: int = 0
 
     @property
     def failed(self) -> bool:
@@ -201,12 +205,8 @@ def start_distributions(
 def calibration_rows(data) -> np.ndarray:
     """Steps a verification fits: those the rig converged at, on every level but the highest
     where three or more remain, which validates (the paper's 2, 4 and 6 N of four levels, as
-    its calibration and :func:`~analysis.diagnosis.augment.augment` do). Fitted on every
-    level, a candidate can settle where a step of the highest one sits on another branch: the
-    mass at point 6 of the benchmark's run stopped at 41 x noise so, and reaches 1.81 fitted
-    on 2, 4 and 6 N. With fewer levels every one is fitted (two levels cannot pin how a law
-    grows with the amplitude: a cubic spring at the mounts was not found on 2 and 5 N of
-    three)."""
+    its calibration and :func:`~analysis.diagnosis.augment.augment` do); with fewer levels
+    every one (docs/diagnosis.md, the rules table)."""
     levels = sorted(float(x) for x in data.levels_n)
     return fitted_rows(data, levels[:-1] if len(levels) >= 4 else levels)
 
@@ -240,9 +240,7 @@ def _linear_recalibration(model: Model, run: str, names: list[str]):
 
 
 #: Factors applied to the screen's coefficients of a candidate at unmeasured DOFs for further
-#: starts: a screen reads the states there coarsely, and a stiff law started at twice its
-#: value can put the balance on another branch (the hardening mounts' k3 screened at 1.9 times
-#: the truth's scores 172 x noise there, at half that 4.4).
+#: starts: a screen reads the states there coarsely (docs/diagnosis.md, the rules table).
 UNMEASURED_START_FACTORS = (0.5, 2.0)
 
 
@@ -322,7 +320,7 @@ def _verify(job: VerifyJob, t0: float) -> Verified:
             n: Distribution("loguniform", 0.002, 0.05) for n in names if n.startswith("zeta_")
         }
     rows = calibration_rows(data) if job.rows is None else np.asarray(job.rows, int)
-    message = ""
+    message, evaluations = "", 0
     try:
         r = refit(
             m2,
@@ -344,6 +342,7 @@ def _verify(job: VerifyJob, t0: float) -> Verified:
         )
         fitted, history, params = r.model, r.history, r.parameters
         message = r.lm.message if r.lm is not None else ""
+        evaluations = r.evaluations
     except (RuntimeError, ValueError) as exc:
         label = "the model" if cand is None else cand.label
         log.warning("verification of %s failed: %s", label, exc)
@@ -365,4 +364,5 @@ def _verify(job: VerifyJob, t0: float) -> Verified:
         linear=linear_info,
         seconds=time.perf_counter() - t0,
         message=message,
+        evaluations=evaluations,
     )

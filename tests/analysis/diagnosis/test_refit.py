@@ -55,22 +55,30 @@ def test_fitting_again_with_the_weights_at_the_fit_scores_better(runs, reference
     )
 
 
+def _stops_at(rule, chi2s, reason: str) -> int | None:
+    """The iteration after which ``rule`` stops a fit whose chi-square per degree of freedom
+    (``2 cost / dof``, here the cost with ``dof`` 2) goes through ``chi2s``; None if it never
+    does. Any other reason fails."""
+    seen: list[dict] = []
+    for i, c in enumerate(chi2s):
+        seen.append({"iteration": i, "cost": c})
+        got = rule.check(seen, 2)
+        if got is not None:
+            assert got == reason
+            return i
+    return None
+
+
 def test_a_hopeless_candidate_gives_up_after_one_iteration_when_far_above_the_bar() -> None:
     """The give-up rule on the fit's iterations (chi-square per degree of freedom = 2 cost /
     dof): after the first iteration only at twice the bar, from the second at the bar, and
     never while the metric still halves (the linear damper in the clamp of the benchmark's
     friction run: 37 856 -> 36 486, over four times the recalibrated model's, one iteration
     taking 10 s of a verification's 12)."""
-    from analysis.diagnosis.refit import _GiveUp, _watch
+    from analysis.diagnosis.refit import NO_BETTER, StopRule
 
     def run(chi2s, bar=100.0):
-        seen = []
-        for i, c in enumerate(chi2s):
-            try:
-                _watch(seen, None, None, (bar, lambda: 2), None, {"iteration": i, "cost": c})
-            except _GiveUp:
-                return i
-        return None
+        return _stops_at(StopRule(give_up_chi2=bar), chi2s, NO_BETTER)
 
     assert run([400.0, 380.0]) == 1  # twice the bar, barely falling: one iteration is enough
     assert run([400.0, 150.0, 140.0]) == 2  # above the bar but under twice it: two
@@ -82,16 +90,10 @@ def test_the_weights_are_recomputed_when_the_fit_stalls_far_below_where_they_wer
     """The clamp's friction in the benchmark's run: 823 -> 9.12 -> 4.15 -> 3.58 -> 3.43, a
     stall (under 5 %) at 240 times below the start: reweigh. A stall near the start, or a fit
     still falling fast, is not."""
-    from analysis.diagnosis.refit import _Reweigh, _watch
+    from analysis.diagnosis.refit import REWEIGH, StopRule
 
     def run(chi2s, drop=2.0):
-        seen = []
-        for i, c in enumerate(chi2s):
-            try:
-                _watch(seen, None, None, None, drop, {"iteration": i, "cost": c})
-            except _Reweigh:
-                return i
-        return None
+        return _stops_at(StopRule(reweigh_drop=drop), chi2s, REWEIGH)
 
     assert run([823.29, 9.12, 4.15, 3.58, 3.43]) == 4
     assert run([100.0, 60.0, 58.0]) is None  # stalled, but under twice below the start
@@ -180,3 +182,38 @@ def test_the_damping_derivative_is_that_of_solving_the_sweeps_again(runs, refere
     scale = np.abs(forward[ok]).max()
     assert np.abs(fast[ok] - forward[ok]).max() < 1e-5 * scale
     assert np.abs(fast[ok] - central[ok]).max() < 1e-2 * scale
+
+
+def test_a_stopped_fit_ends_at_its_last_iterate_and_says_why() -> None:
+    """Levenberg-Marquardt on a problem it would solve, stopped by the rule after its first
+    iteration: the result is the last accepted iterate, its cost that of the residuals there,
+    its message the rule's reason; without a rule the same fit runs to convergence."""
+    from types import SimpleNamespace
+
+    from analysis.diagnosis.refit import NO_BETTER, StopRule, _lm_until
+
+    target = np.array([3.0, -2.0])
+    space = SimpleNamespace(size=2, theta_bounds=lambda: (np.full(2, -10.0), np.full(2, 10.0)))
+
+    calls = []
+
+    def obj(x, want_jac):
+        calls.append(want_jac)
+        # r = (x - target) and 10 rows of a constant misfit: the cost cannot fall below 0.5 * 10
+        r = np.concatenate([x - target, np.ones(10)])
+        J = np.vstack([np.eye(2), np.zeros((10, 2))]) if want_jac else None
+        return r, J
+
+    fake = type("Obj", (), {"space": space, "__call__": staticmethod(obj)})()
+    free = _lm_until(fake, np.zeros(2), StopRule(), 20, 1e-12, None)
+    assert free.success and np.allclose(free.x, target, atol=1e-6)
+    assert free.nfev == len(calls)  # every evaluation counted, with the Jacobian or not
+    calls.clear()
+    # a bar no fit can get under: chi2/dof = 2 cost / (12 - 2) >= 1 > 0.1
+    stopped = _lm_until(fake, np.zeros(2), StopRule(give_up_chi2=0.1), 20, 1e-12, None)
+    assert stopped.message == NO_BETTER and not stopped.success
+    assert stopped.nfev == len(calls)
+    assert stopped.nit == len(stopped.history) - 1 >= 1
+    x = np.array(stopped.history[-1]["x"])
+    assert np.array_equal(stopped.x, x)
+    assert stopped.cost == pytest.approx(0.5 * float(np.sum((x - target) ** 2)) + 5.0)

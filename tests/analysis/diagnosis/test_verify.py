@@ -6,13 +6,8 @@ from __future__ import annotations
 import pytest
 
 from analysis.diagnosis import default_candidates
-from analysis.diagnosis.diagnose import (
-    _other_laws,
-    _shortlist,
-    _to_continue,
-    _walk_jobs,
-    _walk_to,
-)
+from analysis.diagnosis.diagnose import _other_laws, _shortlist, _walk_jobs
+from analysis.diagnosis.policy import FitSummary, Policy
 from analysis.diagnosis.result import DiagnosisSettings
 from analysis.diagnosis.screen import ScreenFit
 from analysis.diagnosis.signatures import Evidence
@@ -215,60 +210,6 @@ def test_the_best_law_walks_to_the_next_points_from_its_fit(reference_model) -> 
         assert known == {"k_c": 4.69e5, "gap": 6.06e-4, "v_c": 27.1}
 
 
-def test_a_best_law_at_a_point_walks_when_it_explains_the_misfit_or_went_far(
-    reference_model,
-) -> None:
-    """The contact at the point next to the second stop explained it to 1.27 x noise in one
-    benchmark run (1.66 in another), the stop's own point reaches 1.01: from a measured point
-    a law that explains the misfit, or took it to a fifth of the recalibrated model's or
-    less, walks to the next points. One that explains little (the hysteretic joint's best,
-    friction at a point: 533 -> 321 x noise) does not. From an unmeasured location only a
-    best that is not at the noise tries the next laws there; a linear candidate does not
-    walk."""
-    st = DiagnosisSettings()
-    m = reference_model
-    at_point = _screened(m, "hertz_contact (above) at point 6")
-    at_mounts = _screened(m, "cubic_spring at springs k_mount")
-    c = at_point.candidate
-    refit = _verified(None, 32.8)
-    assert _walk_to(at_point, _verified(c, 1.27), refit, st) == "points"
-    assert _walk_to(at_point, _verified(c, 1.01), refit, st) == "points"
-    assert _walk_to(at_point, _verified(c, 6.0), refit, st) == "points"  # 6 / 32.8 < 0.2
-    assert _walk_to(at_point, _verified(c, 1.9), _verified(None, 5.6), st) == "points"
-    assert _walk_to(at_point, _verified(c, 321.0), _verified(None, 533.0), st) is None
-    assert _walk_to(at_point, _verified(c, 2.5), _verified(None, 5.6), st) is None
-    assert _walk_to(at_mounts, _verified(c, 1.02), refit, st) is None
-    assert _walk_to(at_mounts, _verified(c, 1.8), refit, st) == "laws"
-    assert _walk_to(None, _verified(c, 3.0), refit, st) is None
-
-
-def test_a_fit_that_went_most_of_the_way_goes_on_when_time_is_spent(reference_model) -> None:
-    """Continued fits: once the stage's time is spent only one that took the misfit to a fifth
-    of the recalibrated model's or less goes on, stopped for time or not and however slowly
-    its last iteration lowered the metric (the clamp's friction: 100 -> 2.8 x noise, its last
-    iteration 3.43 -> 3.41, 1.18 after the continued, reweighted fit)."""
-
-    st = DiagnosisSettings()
-    c = _candidate(reference_model, "cubic_spring at point 5")
-    refit = _verified(None, 100.0)
-    slow = [{"chi2_per_dof": 3.43}, {"chi2_per_dof": 3.41}]
-    fast = [{"chi2_per_dof": 3000.0}, {"chi2_per_dof": 1000.0}]
-    done = [
-        _verified(c, 70.0, "stopped: the time allowed is up", fast),  # fast but far
-        _verified(c, 2.8, "stopped: the time allowed is up", slow),  # most of the way
-        _verified(c, 19.0, "converged", slow),  # a fifth of 100 or less, converged
-        _verified(c, 50.0, "converged", slow),
-    ]
-    assert _to_continue(done, refit, st, time_left=False) == [1, 2]
-    # with time left the fast one that is still far goes on too (the best two of them)
-    assert _to_continue(done, refit, st, time_left=True) == [1, 2]
-    assert _to_continue(done[:1] + done[3:], refit, st, time_left=True) == [0]
-    assert _to_continue(done[:1] + done[3:], refit, st, time_left=False) == []
-    # one that went on already as soon as it finished counts towards the two
-    assert _to_continue(done, refit, st, time_left=True, continued=[1]) == [2]
-    assert _to_continue(done, refit, st, time_left=True, continued=[1, 2]) == []
-
-
 def test_a_fit_that_went_most_of_the_way_goes_on_as_soon_as_it_finishes(
     reference_model, monkeypatch
 ) -> None:
@@ -282,10 +223,10 @@ def test_a_fit_that_went_most_of_the_way_goes_on_as_soon_as_it_finishes(
     dg = importlib.import_module("analysis.diagnosis.diagnose")
     st = DiagnosisSettings()
     c = _candidate(reference_model, "cubic_spring at point 5")
-    refit = _verified(None, 100.0)
-    assert dg._goes_on_at_once(_verified(c, 2.8, "stopped: the time allowed is up"), refit, st)
-    assert not dg._goes_on_at_once(_verified(c, 1.9), refit, st)
-    assert not dg._goes_on_at_once(_verified(c, 40.0), refit, st)
+    policy = Policy(st, FitSummary.of(_verified(None, 100.0)))
+
+    def at_once(v) -> bool:
+        return policy.goes_on_at_once(FitSummary.of(v))
 
     order: list[str] = []
     rms = {"a": 50.0, "b": 2.8, "c": 70.0, "d": 60.0, "b+": 1.1}
@@ -298,7 +239,7 @@ def test_a_fit_that_went_most_of_the_way_goes_on_as_soon_as_it_finishes(
         return VerifyJob("", name, "x.h5", None, c, {}, {})
 
     def follow(i, v):
-        return job("abcd"[i] + "+") if dg._goes_on_at_once(v, refit, st) else None
+        return job("abcd"[i] + "+") if at_once(v) else None
 
     monkeypatch.setattr(dg, "run_verify", fake_verify)
     with ThreadPoolExecutor(1) as ex:
