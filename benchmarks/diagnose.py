@@ -527,12 +527,18 @@ def run_case(truth: str, folder: Path, *, quick: bool = False, seed: int = 0) ->
     out["candidates"] = len(diag.screen) + len(diag.linear)
     pick = diag.group[0] if diag.group else (diag.ranking[0] if diag.ranking else None)
     if len(diag.group) > 1 and diag.recommendation:
-        pick, sep, sep_data_s = separate(truth, diag, data, folder, seed)
-        out["data_s"] = round(out["data_s"] + sep_data_s, 1)
-        out["tie_resolved"] = (
-            sep.resolved and truth in TRUE_EFFECTS and _is_true(pick.candidate, truth)
-        )
-        out["after_separation"] = sep.tied
+        try:
+            pick, sep, sep_data_s = separate(truth, diag, data, folder, seed)
+        except RuntimeError as exc:  # the rig could not make the separating run
+            print(f"separating run failed: {exc}")
+            out["tie_resolved"] = False
+            out["separation_error"] = str(exc)
+        else:
+            out["data_s"] = round(out["data_s"] + sep_data_s, 1)
+            out["tie_resolved"] = (
+                sep.resolved and truth in TRUE_EFFECTS and _is_true(pick.candidate, truth)
+            )
+            out["after_separation"] = sep.tied
     if truth in TRUE_EFFECTS:
         out["true_effect_rank"] = _rank(diag, truth)
         if pick is not None:
