@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Literal
 
 from analysis.calibration.uncertainty import ADEQUATE_RMS
 from analysis.diagnosis.candidates import Candidate
@@ -12,116 +13,109 @@ from analysis.diagnosis.linear_screen import LinearFit
 from analysis.diagnosis.screen import ScreenFit
 from analysis.diagnosis.signatures import Evidence
 from analysis.diagnosis.verify import Verified
+from analysis.settings import Integer, NonNegative, Positive, declare, settings
 
 __all__ = ["Diagnosis", "DiagnosisSettings", "RankedCandidate"]
 
 
-@dataclass(frozen=True)
+@settings()
 class DiagnosisSettings:
-    """Settings of :func:`~analysis.diagnosis.diagnose.diagnose`.
+    """Settings of :func:`~analysis.diagnosis.diagnose.diagnose` (declared once: the command
+    line's options, the GUI's form and its tooltips come from these declarations)."""
 
-    Parameters
-    ----------
-    adequate_rms : float
-        A model whose residual (root of chi-square per degree of freedom) is at most this,
-        as it is or with its own parameters recalibrated, is adequate: nothing is claimed.
-    explained_rms : float
-        A verified candidate explains the misfit when it brings the residual to at most this
-        (above ``adequate_rms``: a law whose force switches sharply, friction, leaves some of
-        its harmonics beyond the balance's).
-    tie_bic : float
-        Candidates within this BIC of the best are reported as a group.
-    linear_bic, linear_ratio : float
-        A linear candidate is verified on the stepped sine when it lowers the BIC of the
-        linear test by more than ``linear_bic`` and its metric to ``linear_ratio`` of the
-        model's or less (the linear test's neighbouring frequencies are correlated, so a BIC
-        gain alone can be a fit of small errors).
-    n_verify : int
-        Distinct laws of the screen verified in the full model (the best law also at its
-        second location).
-    n_walk : int
-        When the best verified candidate explains too little: at a measured point, its law
-        is verified at this many more measured points (the screen's next), started from its
-        fit; at an unmeasured location (the mounts, a joint), this many other laws there (the
-        simplest of the screen's next).
-    n_refine : int
-        Best screened candidates refined by the screen's alternations.
-    verify_iterations : int
-        Levenberg-Marquardt iterations per verification.
-    verify_seconds : float
-        Processor time allowed for one verification's Levenberg-Marquardt (its last iterate
-        is scored; processor time, so other processes on the machine do not cut it short).
-    reweight_drop : float
-        A verification recomputes its weights (the force's error through the model) when it
-        stalls at a metric this many times below the one they were computed at, and goes on
-        from there (:func:`~analysis.diagnosis.refit.refit`).
-    continue_seconds, continue_decrease : float
-        When no candidate explains the misfit, the (at most two) verifications stopped for
-        time while their last iteration still lowered the metric by ``continue_decrease`` or
-        more (a share) go on for ``continue_seconds`` from where they stopped.
-    n_starts : int
-        Further Latin hypercube starts for the best two when no candidate reaches the noise.
-    workers : int
-        Processes for the verifications and the linear screen (1: in this process).
-    n_harmonics, n_time : int
-        Balance settings of every prediction.
-    time_budget_s : float
-        Continued fits, the second stage of verifications and the further starts begin only
-        while the verifications so far have used less than this much processor time.
-    restart_fraction : float
-        Further starts are tried only for a best candidate that brought the residual of the
-        recalibrated model down to this fraction or below (a strong effect stuck in a local
-        minimum), not for one that explains little.
-    locations : {"measured", "structure"}
-        The candidate set's places (:data:`~analysis.diagnosis.candidates.LOCATION_SCOPES`):
-        ``"measured"`` the places the sensors see directly, ``"structure"`` also every other
-        direction of a point, each spring alone and pairs of nodes (more look-alikes: a tie
-        there needs the separating measurement).
-    rescreen_ratio : float
-        When recalibrating the model's own parameters brings its residual to this fraction of
-        the calibrated model's or below, the calibration was a poor start (a missing effect
-        can pull it into a far minimum): the screen runs again from the recalibrated model,
-        and the verifications start from there (0: never).
-    """
-
-    adequate_rms: float = ADEQUATE_RMS
-    explained_rms: float = 2.0
-    tie_bic: float = 10.0
-    linear_bic: float = 10.0
-    linear_ratio: float = 0.3
-    n_verify: int = 2
-    n_walk: int = 2
-    n_refine: int = 6
-    verify_iterations: int = 8
-    verify_seconds: float = 12.0
-    reweight_drop: float = 2.0
-    continue_seconds: float = 30.0
-    continue_decrease: float = 0.1
-    n_starts: int = 4
-    workers: int = 2
-    n_harmonics: int = 9
-    n_time: int = 128
-    time_budget_s: float = 40.0
-    restart_fraction: float = 0.2
-    rescreen_ratio: float = 0.5
-    locations: str = "measured"
-
-    def __post_init__(self) -> None:
-        if self.locations not in ("measured", "structure"):
-            raise ValueError(
-                "DiagnosisSettings.locations: expected 'measured' or 'structure', got "
-                f"{self.locations!r}"
-            )
-        if self.adequate_rms <= 0 or self.explained_rms <= 0 or self.tie_bic < 0:
-            raise ValueError("DiagnosisSettings: thresholds must be positive")
-        if self.n_verify < 1 or self.workers < 1 or self.verify_iterations < 1:
-            raise ValueError("DiagnosisSettings: n_verify, workers, iterations must be >= 1")
-        if self.n_walk < 0:
-            raise ValueError(f"DiagnosisSettings.n_walk: must be >= 0, got {self.n_walk}")
-        if not 0 <= self.rescreen_ratio < 1:
-            raise ValueError(
-                f"DiagnosisSettings.rescreen_ratio: must be in [0, 1), got {self.rescreen_ratio}"
-            )
+    adequate_rms: Positive = declare(
+        "A model whose residual (root of chi-square per degree of freedom) is at most this, as "
+        "it is or with its own parameters recalibrated, is adequate: nothing is claimed.",
+        ADEQUATE_RMS,
+    )
+    explained_rms: Positive = declare(
+        "A verified candidate explains the misfit when it brings the residual to at most this "
+        "(above adequate_rms: a law whose force switches sharply leaves some of its harmonics "
+        "beyond the balance's).",
+        2.0,
+    )
+    tie_bic: NonNegative = declare(
+        "Candidates within this BIC of the best are reported as a group (a tie).", 10.0
+    )
+    linear_bic: NonNegative = declare(
+        "A linear candidate is verified on the stepped sine when it lowers the linear test's "
+        "BIC by more than this (and its metric to linear_ratio of the model's).",
+        10.0,
+    )
+    linear_ratio: Positive = declare(
+        "A linear candidate is verified only when it also brings the linear test's metric to "
+        "this share of the model's or less (a BIC gain alone can be a fit of small errors).",
+        0.3,
+    )
+    n_verify: Integer = declare(
+        "Distinct laws of the screen verified in the full model (the best also at its second "
+        "location).",
+        2,
+        ge=1,
+    )
+    n_walk: Integer = declare(
+        "When the best verified candidate explains too little: its law at this many more "
+        "measured points, or this many other laws at an unmeasured location.",
+        2,
+        ge=0,
+    )
+    n_refine: Integer = declare(
+        "Best screened candidates refined by the screen's alternations.", 6, ge=0
+    )
+    verify_iterations: Integer = declare(
+        "Levenberg-Marquardt iterations per verification.", 8, ge=1
+    )
+    verify_seconds: Positive = declare(
+        "Processor time allowed for one verification's Levenberg-Marquardt [s] (its last "
+        "iterate is scored).",
+        12.0,
+    )
+    reweight_drop: Positive = declare(
+        "A verification recomputes its weights when it stalls at a metric this many times "
+        "below the one they were computed at.",
+        2.0,
+    )
+    continue_seconds: NonNegative = declare(
+        "When nothing explains the misfit, verifications stopped for time while still "
+        "improving go on for this much processor time [s].",
+        30.0,
+    )
+    continue_decrease: NonNegative = declare(
+        "Verifications stopped for time go on only if their last iteration lowered the metric "
+        "by this share or more.",
+        0.1,
+    )
+    n_starts: Integer = declare(
+        "Further Latin hypercube starts for the best two when no candidate reaches the noise.",
+        4,
+        ge=0,
+    )
+    workers: Integer = declare(
+        "Processes for the verifications and the linear screen (1: in this process).", 2, ge=1
+    )
+    n_harmonics: Integer = declare("Harmonics of the balance in every prediction.", 9, ge=1)
+    n_time: Integer = declare("Time samples per period of the balance's AFT.", 128, ge=8)
+    time_budget_s: NonNegative = declare(
+        "Continued fits, the second stage and further starts begin only while the "
+        "verifications so far used less processor time than this [s].",
+        40.0,
+    )
+    restart_fraction: Positive = declare(
+        "Further starts only for a best candidate that brought the recalibrated model's "
+        "residual to this share or below (a strong effect in a local minimum).",
+        0.2,
+    )
+    rescreen_ratio: NonNegative = declare(
+        "Screen again from the model with its own parameters recalibrated when that brings "
+        "the residual to this share of the calibrated model's or below (0: never).",
+        0.5,
+        lt=1,
+    )
+    locations: Literal["measured", "structure"] = declare(
+        "The candidates' places (LOCATION_SCOPES): the ones the sensors see directly, or also "
+        "every other direction, each spring alone and pairs of nodes (more look-alikes).",
+        "measured",
+    )
 
 
 @dataclass

@@ -3,7 +3,7 @@
 The settings are a form generated from :class:`analysis.diagnosis.DiagnosisSettings` (the GUI
 runs verifications in its own process: ``workers = 1`` unless changed); the candidates are
 :func:`analysis.diagnosis.default_candidates` of the model, optionally kept to some locations
-(``point 5``, ``mounts``, ``joint clamp rz``) and laws (``quadratic_damper``).
+(``point 5``, ``springs k_mount``, ``joint clamp rz``) and laws (``quadratic_damper``).
 
 A first diagnosis needs none of the expert settings: the candidate filters, the recalibration's
 starts and the time budget are shown; the rest (:data:`ADVANCED`) wait closed under
@@ -13,11 +13,11 @@ starts and the time budget are shown; the rest (:data:`ADVANCED`) wait closed un
 from __future__ import annotations
 
 import dataclasses
-import re
 
 from PySide6 import QtWidgets
 
 from analysis.diagnosis import DiagnosisSettings, default_candidates
+from analysis.settings import ConfigError, build
 from rig.gui.forms import SettingsForm
 from rig.gui.settings_fields import Field, dataclass_fields, format_value
 
@@ -36,7 +36,6 @@ _WHY_DEFAULT = {
     "workers": "1 here: the GUI verifies in its own process (the library's default, "
     f"{DiagnosisSettings().workers}, forks worker processes)",
 }
-_SETTING_ERROR = re.compile(r"^DiagnosisSettings\.(\w+): (.*)$", re.S)
 
 
 def _with_default(field: Field) -> Field:
@@ -57,7 +56,7 @@ class DiagnosisOptions(QtWidgets.QWidget):
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         self.locations = QtWidgets.QLineEdit()
-        self.locations.setPlaceholderText("all (e.g. point 5, point 7, mounts)")
+        self.locations.setPlaceholderText("all (e.g. point 5, point 7 x, springs k_mount)")
         self.laws = QtWidgets.QLineEdit()
         self.laws.setPlaceholderText("all (e.g. quadratic_damper, cubic_spring)")
         self.starts = QtWidgets.QSpinBox()
@@ -106,13 +105,9 @@ class DiagnosisOptions(QtWidgets.QWidget):
         self.form.clear_errors()
         values = self.form.document().get("diagnosis", {})
         try:
-            return DiagnosisSettings(**values)
-        except (TypeError, ValueError) as exc:
-            named = _SETTING_ERROR.match(str(exc))
-            if named and named.group(1) in values:
-                self.form.show_error(f"diagnosis.{named.group(1)}", named.group(2))
-            else:
-                self.form.show_error("", str(exc))
+            return build(DiagnosisSettings, values, "diagnosis settings", at=("diagnosis",))
+        except ConfigError as exc:
+            self.form.show_error(exc.path, exc.problem)
             raise ValueError(str(exc)) from None
 
     def candidates(self, model):
@@ -122,6 +117,6 @@ class DiagnosisOptions(QtWidgets.QWidget):
             return None
         return [
             c
-            for c in default_candidates(model)
+            for c in default_candidates(model, scope="structure")
             if (not locations or c.location.name in locations) and (not laws or c.law.kind in laws)
         ]

@@ -74,5 +74,5 @@ def test_the_rescreen_ratio_reaches_the_settings_and_a_bad_one_is_refused() -> N
     args = parser.parse_args(["augment", "run.h5", "--model", "m.toml", "--out", "a.toml"])
     assert _settings(args).rescreen_ratio == 0.5
     args.rescreen_ratio = 1.0
-    with pytest.raises(ValueError, match="rescreen_ratio: must be in"):
+    with pytest.raises(ValueError, match="rescreen_ratio: must be < 1"):
         _settings(args)

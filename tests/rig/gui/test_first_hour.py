@@ -220,7 +220,7 @@ def test_expert_diagnosis_settings_are_behind_advanced_with_their_defaults(qtbot
     with pytest.raises(ValueError, match="rescreen_ratio"):
         options.settings()
     assert options.advanced.expanded
-    assert "must be in [0, 1)" in form.error_text("diagnosis.rescreen_ratio")
+    assert "must be < 1, got 2" in form.error_text("diagnosis.rescreen_ratio")
     qtbot.mouseClick(options.restore, QtCore.Qt.MouseButton.LeftButton)
     assert options.settings() == GUI_DIAGNOSIS
 
