@@ -10,18 +10,18 @@ Every error names the file, the key path (``members[3].section``) and the proble
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal, NoReturn, TypeVar
 
 from pydantic import Field, PlainSerializer, PlainValidator, Strict
 
 from .fe import DIRECTIONS, FrameSpec, Joint, LumpedMass, Material, Member, Section, Spring
-from .fe.values import Coefficient, finite
+from .fe.values import Coefficient, Finite, finite
 from .matrix_io import FORMATS, IMPORT_DIRECTIONS
 from .settings import (
     ConfigError,
@@ -278,15 +278,60 @@ class DampingSpec:
         return [self.per_mode.get(k, self.default_zeta) for k in range(1, n_modes + 1)]
 
 
-@dataclass(frozen=True)
+def _format(value: Any) -> str:
+    if not isinstance(value, str):
+        raise SettingError((), f"expected a string, got {value!r}")
+    if value not in FORMATS:
+        raise SettingError((), f"unknown format {value!r}; expected one of {FORMATS}")
+    return value
+
+
+def _dof_map(value: Any) -> str | tuple[str, ...]:
+    if isinstance(value, str):
+        return value
+    if not isinstance(value, list | tuple):
+        raise SettingError((), f"expected an array, got {type(value).__name__}")
+    for label in value:
+        if not isinstance(label, str):
+            raise SettingError((), f"expected a string, got {label!r}")
+    return tuple(value)
+
+
+MTX_FILES = ("M", "K", "C")
+
+
+@settings()
 class LinearPartSpec:
     """Linear part imported from files: ``format`` and absolute ``files`` (``file`` for one
     archive, ``M``/``K``/``C`` for MatrixMarket) plus a DOF map (file path or labels)."""
 
-    format: str
-    files: dict[str, str]
-    dof_map: str | tuple[str, ...] | None = None
-    masses: dict[str, float] = field(default_factory=dict)
+    format: Annotated[str, PlainValidator(_format)] = declare(
+        f"Format of the matrices: one of {', '.join(FORMATS)}."
+    )
+    files: dict[str, Text] = Field(
+        default_factory=dict, description="The matrix files (the file's 'file' or 'files')."
+    )
+    dof_map: Annotated[str | tuple[str, ...], PlainValidator(_dof_map)] | None = declare(
+        "DOF map: a file name or a list of 'node/direction'.", None
+    )
+    masses: dict[str, Finite] = Field(
+        default_factory=dict, description="Point masses [kg] at the translational DOFs of nodes."
+    )
+
+    def __post_init__(self) -> None:
+        if self.format != "mtx":
+            if "file" not in self.files:
+                raise SettingError(("file",), "missing")
+            return
+        if unknown := sorted(set(self.files) - set(MTX_FILES)):
+            raise SettingError(
+                ("files", unknown[0]), f"unknown key; expected one of {sorted(MTX_FILES)}"
+            )
+        for k in ("M", "K"):
+            if k not in self.files:
+                raise SettingError(("files", k), "missing")
+        if self.dof_map is None:
+            raise SettingError(("dof_map",), "missing (a file name or a list of 'node/direction')")
 
 
 class _Reader:
@@ -434,28 +479,23 @@ def _points(r: _Reader, doc: dict, dirs: tuple[str, ...]) -> dict[int, Measureme
 
 
 def _linear_part(r: _Reader, t: dict, base: Path) -> LinearPartSpec:
-    p: KeyPath = ("linear_part",)
-    r.table(t, p, {"format", "file", "files", "dof_map", "masses"})
-    fmt = r.text(r.need(t, "format", p), (*p, "format"))
-    if fmt not in FORMATS:
-        r.fail((*p, "format"), f"unknown format {fmt!r}; expected one of {FORMATS}")
-    if fmt == "mtx":
-        files = r.table(r.need(t, "files", p), (*p, "files"), {"M", "K", "C"})
-        for k in ("M", "K"):
-            r.need(files, k, (*p, "files"))
-    else:
-        files = {"file": r.need(t, "file", p)}
-    files = {k: str((base / r.text(v, (*p, k))).resolve()) for k, v in files.items()}
-    dof_map = t.get("dof_map")
-    if isinstance(dof_map, str):
-        dof_map = str((base / dof_map).resolve())
-    elif dof_map is not None:
-        dof_map = tuple(r.text(s, (*p, "dof_map")) for s in r.array(dof_map, (*p, "dof_map")))
-    elif fmt == "mtx":
-        r.fail((*p, "dof_map"), "missing (a file name or a list of 'node/direction')")
-    masses = r.table(t.get("masses", {}), (*p, "masses"))
-    masses = {n: r.finite(m, (*p, "masses", n)) for n, m in masses.items()}
-    return LinearPartSpec(format=fmt, files=files, dof_map=dof_map, masses=masses)
+    """The file's ``file`` is ``files = {file = ...}`` of an archive; relative file names are
+    found beside the model file."""
+    data = {k: v for k, v in t.items() if k != "file"}
+    if t.get("format") != "mtx":
+        data["files"] = {"file": t["file"]} if "file" in t else {}
+    try:
+        spec = r.build(LinearPartSpec, data, ("linear_part",))
+    except ModelFileError as exc:
+        if exc.path[:3] == ("linear_part", "files", "file"):  # the file's key is 'file'
+            r.fail(("linear_part", "file"), exc.problem)
+        raise
+    dof_map = spec.dof_map
+    return dataclasses.replace(
+        spec,
+        files={k: str((base / v).resolve()) for k, v in spec.files.items()},
+        dof_map=str((base / dof_map).resolve()) if isinstance(dof_map, str) else dof_map,
+    )
 
 
 def _damping(r: _Reader, t: dict, base: Path) -> DampingSpec:

@@ -179,6 +179,7 @@ _PROBLEMS = {
     "tuple_type": "expected an array, got {input!r}",
     "too_short": "expected at least {min_length} entries, got {input!r}",
     "dataclass_type": "expected a table, got {input!r}",
+    "dict_type": "expected a table, got {input!r}",
     "dataclass_exact_type": "expected a table, got {input!r}",
 }
 

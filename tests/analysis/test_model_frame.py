@@ -9,8 +9,8 @@ import pytest
 
 from analysis.elements.base import ElementParameterError, make_element
 from analysis.fe import Joint, LumpedMass, Material, Member, Section, Spring
-from analysis.model import ModelFileError, load_model
-from analysis.model_file import to_document
+from analysis.model import Model, ModelFileError, load_model
+from analysis.model_file import LinearPartSpec, to_document
 from analysis.settings import ConfigError, build, declared_fields, dump
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -191,3 +191,41 @@ def test_element_errors_carry_the_parameter_name(tmp_path):
     with pytest.raises(ModelFileError, match="option 'side' must be -1") as err:
         load_model(file)
     assert err.value.path == ("nonlinear", 0, "options", "side")
+
+
+def test_the_linear_part_reads_with_its_files_beside_the_model_file():
+    path = ROOT / "examples/duffing.toml"
+    spec = load_model(path).linear_part
+    assert spec == LinearPartSpec(
+        format="mtx",
+        files={k: str(path.parent.resolve() / f"duffing.{k}.mtx") for k in ("M", "K")},
+        dof_map=("mass/x",),
+    )
+    with pytest.raises(ConfigError, match=r"LinearPartSpec\.dof_map: missing"):
+        LinearPartSpec(format="mtx", files={"M": "a.mtx", "K": "b.mtx"})
+
+
+LINEAR = '[linear_part]\nformat = "npz"\nfile = "p.npz"\n[points.1]\nnode = "2"\ndirection = "x"\n'
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "path", "problem"),
+    [
+        ('file = "p.npz"', "file = 3", ("linear_part", "file"), "expected a string, got 3"),
+        ('file = "p.npz"', "", ("linear_part", "file"), "missing"),
+        ('"npz"', '"npy"', ("linear_part", "format"), "unknown format 'npy'"),
+        ('"npz"\nfile = "p.npz"', '"mtx"\nfiles = {M = "a.mtx"}', ("linear_part", "files", "K"),
+         "missing"),
+        ('"npz"\nfile = "p.npz"', '"mtx"\nfiles = {M = "a", K = "b", D = "c"}',
+         ("linear_part", "files", "D"), "unknown key"),
+        ('"npz"\nfile = "p.npz"', '"mtx"\nfiles = {M = "a", K = "b"}', ("linear_part", "dof_map"),
+         "missing \\(a file name or a list"),
+        ('file = "p.npz"', 'file = "p.npz"\nmasses = {a = nan}', ("linear_part", "masses", "a"),
+         "expected a finite number"),
+    ],
+)  # fmt: skip
+def test_linear_part_errors_name_the_file_key(tmp_path, old, new, path, problem):
+    assert old in LINEAR
+    with pytest.raises(ModelFileError, match=problem) as info:
+        Model.from_toml_text(LINEAR.replace(old, new, 1), str(tmp_path / "m.toml"))
+    assert info.value.path == path
