@@ -335,8 +335,8 @@ class LinearPartSpec:
 
 
 class _Reader:
-    """Typed access to the parsed TOML with key-path errors (the frame's tables; the other
-    tables are read through their declared settings, :meth:`build`)."""
+    """Typed access to the parsed TOML with key-path errors (the tables keyed by name: nodes,
+    supports; the records are read through their declared settings, :meth:`build`)."""
 
     def __init__(self, source: str) -> None:
         self.source = source
@@ -362,19 +362,11 @@ class _Reader:
             self.fail(path, f"expected an array, got {type(value).__name__}")
         return value
 
-    def need(self, t: dict, key: str, path: KeyPath) -> Any:
-        if key not in t:
-            self.fail((*path, key), "missing")
-        return t[key]
-
-    def finite(self, value: Any, path: KeyPath) -> float:
+    def coordinate(self, value: Any, path: KeyPath) -> float:
         try:
-            return finite(value)
+            x = finite(value)
         except SettingError as exc:
             self.fail(path, exc.problem)
-
-    def coordinate(self, value: Any, path: KeyPath) -> float:
-        x = self.finite(value, path)
         if abs(x) > MAX_COORDINATE_M:
             self.fail(path, f"a coordinate [m] within +-{MAX_COORDINATE_M:g}, got {value!r}")
         return x
