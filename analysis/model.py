@@ -150,6 +150,15 @@ class Assembly:
         return np.sqrt(np.clip(lam, 0.0, None)) / (2 * np.pi), phi
 
 
+def _key_of(spec: NonlinearSpec, i: int, name: str) -> KeyPath:
+    """Where ``nonlinear[i]`` gives the element parameter or option ``name`` (the element as
+    a whole if it gives neither: a missing parameter)."""
+    for key in ("params", "options"):
+        if name in getattr(spec, key):
+            return ("nonlinear", i, key, name)
+    return ("nonlinear", i)
+
+
 def _readonly(a: np.ndarray) -> np.ndarray:
     a.setflags(write=False)
     return a
@@ -245,15 +254,8 @@ class Model:
             except ModelFileError as exc:
                 # the element was built alone, as nonlinear[0]: name its index in the model
                 path, problem = ("nonlinear", i, *exc.path[2:]), exc.problem
-                m = re.search(r"parameter\(?s?\)? \[?'(\w+)'", problem)
-                if path == ("nonlinear", i) and m and m.group(1) in spec.params:
-                    key = m.group(1)
-                    path = ("nonlinear", i, "params", key)
-                    ref = spec.params[key]
-                    if isinstance(ref, str):
-                        problem = f"{problem} (parameters.{ref}.value = {values[ref]!r})"
-                elif path == ("nonlinear", i) and m and "unknown" in problem:
-                    path = ("nonlinear", i, "params", m.group(1))
+                if path[2:3] == ("params",) and isinstance(ref := spec.params[str(path[3])], str):
+                    problem = f"{problem} (parameters.{ref}.value = {values[ref]!r})"
                 raise ModelFileError(self.source, path, problem) from None
 
     def warn_out_of_bounds(self) -> list[str]:
@@ -456,7 +458,7 @@ class Model:
         """:meth:`build_elements` for the given specs (errors name their index in ``specs``)."""
         import analysis.elements  # noqa: F401  (importing the library fills the registry)
 
-        from .elements.base import ELEMENT_TYPES, make_element
+        from .elements.base import ELEMENT_TYPES, ElementParameterError, make_element
 
         values = self.values()
         out = []
@@ -470,6 +472,10 @@ class Model:
             kw = {k: values[v] if isinstance(v, str) else v for k, v in spec.params.items()}
             try:
                 out.append((spec, make_element(spec.kind, **kw, **spec.options)))
+            except ElementParameterError as exc:
+                raise ModelFileError(
+                    self.source, _key_of(spec, i, exc.parameter), str(exc)
+                ) from None
             except (TypeError, ValueError) as exc:
                 raise ModelFileError(self.source, ("nonlinear", i), str(exc)) from None
         return out

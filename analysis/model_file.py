@@ -10,17 +10,18 @@ Every error names the file, the key path (``members[3].section``) and the proble
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal, NoReturn, TypeVar
 
 from pydantic import Field, PlainSerializer, PlainValidator, Strict
 
 from .fe import DIRECTIONS, FrameSpec, Joint, LumpedMass, Material, Member, Section, Spring
+from .fe.values import Coefficient, Finite, finite
 from .matrix_io import FORMATS, IMPORT_DIRECTIONS
 from .settings import (
     ConfigError,
@@ -68,15 +69,6 @@ _TOP_KEYS = {
     "damping",
     "linear_part",
     "truth",
-}
-_FILE_KEYS = {
-    "b_m": "b",
-    "h_m": "h",
-    "outer_m": "outer",
-    "wall_m": "wall",
-    "area_m2": "A",
-    "inertia_m4": "I",
-    "max_element_length_m": "max_element_length",
 }
 DAMPING_MODAL = ("default_zeta", "per_mode")
 T = TypeVar("T")
@@ -179,22 +171,6 @@ class MeasurementPoint:
     )
 
 
-def _finite(value: Any, path: KeyPath = ()) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise SettingError(path, f"expected a number, got {value!r}")
-    if not math.isfinite(value):
-        raise SettingError(path, f"expected a finite number, got {value!r}")
-    return float(value)
-
-
-def _coefficient(value: Any) -> float | str:
-    return value if isinstance(value, str) else _finite(value)
-
-
-#: A number or the name of a model parameter.
-Coefficient = Annotated[float | str, PlainValidator(_coefficient)]
-
-
 @settings()
 class NonlinearSpec:
     """A nonlinear element: ``kind`` between DOF ``at`` and ``to`` (``None``: ground).
@@ -232,7 +208,7 @@ def _rayleigh(value: Any) -> tuple[float, float]:
     else:
         raise SettingError((), f"expected a table of alpha and beta, got {value!r}")
     for k, v in named:
-        if _finite(v, (k,)) < 0:
+        if finite(v, (k,)) < 0:
             raise SettingError((k,), f"must be >= 0, got {v!r}")
     return float(named[0][1]), float(named[1][1])
 
@@ -248,7 +224,7 @@ def _matrix(value: Any) -> tuple[tuple[float, ...], ...] | str:
     for i, row in enumerate(value):
         if not isinstance(row, list | tuple):
             raise SettingError((i,), f"expected an array, got {row!r}")
-        rows.append(tuple(_finite(v, (i, j)) for j, v in enumerate(row)))
+        rows.append(tuple(finite(v, (i, j)) for j, v in enumerate(row)))
     if not rows or any(len(row) != len(rows) for row in rows):
         raise SettingError((), "expected a square array of rows")
     return tuple(rows)
@@ -302,20 +278,65 @@ class DampingSpec:
         return [self.per_mode.get(k, self.default_zeta) for k in range(1, n_modes + 1)]
 
 
-@dataclass(frozen=True)
+def _format(value: Any) -> str:
+    if not isinstance(value, str):
+        raise SettingError((), f"expected a string, got {value!r}")
+    if value not in FORMATS:
+        raise SettingError((), f"unknown format {value!r}; expected one of {FORMATS}")
+    return value
+
+
+def _dof_map(value: Any) -> str | tuple[str, ...]:
+    if isinstance(value, str):
+        return value
+    if not isinstance(value, list | tuple):
+        raise SettingError((), f"expected an array, got {type(value).__name__}")
+    for label in value:
+        if not isinstance(label, str):
+            raise SettingError((), f"expected a string, got {label!r}")
+    return tuple(value)
+
+
+MTX_FILES = ("M", "K", "C")
+
+
+@settings()
 class LinearPartSpec:
     """Linear part imported from files: ``format`` and absolute ``files`` (``file`` for one
     archive, ``M``/``K``/``C`` for MatrixMarket) plus a DOF map (file path or labels)."""
 
-    format: str
-    files: dict[str, str]
-    dof_map: str | tuple[str, ...] | None = None
-    masses: dict[str, float] = field(default_factory=dict)
+    format: Annotated[str, PlainValidator(_format)] = declare(
+        f"Format of the matrices: one of {', '.join(FORMATS)}."
+    )
+    files: dict[str, Text] = Field(
+        default_factory=dict, description="The matrix files (the file's 'file' or 'files')."
+    )
+    dof_map: Annotated[str | tuple[str, ...], PlainValidator(_dof_map)] | None = declare(
+        "DOF map: a file name or a list of 'node/direction'.", None
+    )
+    masses: dict[str, Finite] = Field(
+        default_factory=dict, description="Point masses [kg] at the translational DOFs of nodes."
+    )
+
+    def __post_init__(self) -> None:
+        if self.format != "mtx":
+            if "file" not in self.files:
+                raise SettingError(("file",), "missing")
+            return
+        if unknown := sorted(set(self.files) - set(MTX_FILES)):
+            raise SettingError(
+                ("files", unknown[0]), f"unknown key; expected one of {sorted(MTX_FILES)}"
+            )
+        for k in ("M", "K"):
+            if k not in self.files:
+                raise SettingError(("files", k), "missing")
+        if self.dof_map is None:
+            raise SettingError(("dof_map",), "missing (a file name or a list of 'node/direction')")
 
 
 class _Reader:
-    """Typed access to the parsed TOML with key-path errors (the frame's tables; the other
-    tables are read through their declared settings, :meth:`build`)."""
+    """Typed access to the parsed TOML with key-path errors (the tables keyed by name: nodes,
+    supports; the records are read through their declared settings, :meth:`build`)."""
 
     def __init__(self, source: str) -> None:
         self.source = source
@@ -341,19 +362,11 @@ class _Reader:
             self.fail(path, f"expected an array, got {type(value).__name__}")
         return value
 
-    def need(self, t: dict, key: str, path: KeyPath) -> Any:
-        if key not in t:
-            self.fail((*path, key), "missing")
-        return t[key]
-
-    def finite(self, value: Any, path: KeyPath) -> float:
+    def coordinate(self, value: Any, path: KeyPath) -> float:
         try:
-            return _finite(value)
+            x = finite(value)
         except SettingError as exc:
             self.fail(path, exc.problem)
-
-    def coordinate(self, value: Any, path: KeyPath) -> float:
-        x = self.finite(value, path)
         if abs(x) > MAX_COORDINATE_M:
             self.fail(path, f"a coordinate [m] within +-{MAX_COORDINATE_M:g}, got {value!r}")
         return x
@@ -363,69 +376,10 @@ class _Reader:
             self.fail(path, f"expected a string, got {value!r}")
         return value
 
-    def coef(self, value: Any, path: KeyPath) -> float | str:
-        return value if isinstance(value, str) else self.finite(value, path)
-
     def direction(self, value: Any, path: KeyPath, allowed: tuple[str, ...] = DIRECTIONS) -> str:
         if value not in allowed:
             self.fail(path, f"bad direction {value!r}; expected one of {allowed}")
         return value
-
-    def make(self, cls: type, path: KeyPath, **kwargs: Any) -> Any:
-        """``cls(**kwargs)`` of a frame record; its error is located at the field's file key
-        below ``path``."""
-        try:
-            return cls(**kwargs)
-        except SettingError as exc:
-            where = (_FILE_KEYS.get(p, p) if isinstance(p, str) else p for p in exc.path)
-            self.fail((*path, *where), exc.problem)
-
-
-def _section(r: _Reader, t: dict, path: KeyPath) -> Section:
-    r.table(t, path, {"shape", "b", "h", "outer", "wall", "A", "I"})
-    shape = r.text(t.get("shape", "general"), (*path, "shape"))
-    keys = {"b": "b_m", "h": "h_m", "outer": "outer_m", "wall": "wall_m"}
-    keys |= {"A": "area_m2", "I": "inertia_m4"}
-    kw = {keys[k]: r.finite(v, (*path, k)) for k, v in t.items() if k != "shape"}
-    return r.make(Section, path, shape=shape, **kw)
-
-
-def _member(r: _Reader, t: dict, path: KeyPath, i: int) -> Member:
-    allowed = {"name", "nodes", "section", "material", "elements", "max_element_length"}
-    r.table(t, path, allowed | {"nsm", "group"})
-    nodes = r.array(r.need(t, "nodes", path), (*path, "nodes"))
-    elements = t.get("elements")
-    if elements is not None and (isinstance(elements, bool) or not isinstance(elements, int)):
-        r.fail((*path, "elements"), f"expected an integer, got {elements!r}")
-    max_len = t.get("max_element_length")
-    max_len = None if max_len is None else r.finite(max_len, (*path, "max_element_length"))
-    return r.make(
-        Member,
-        path,
-        name=r.text(t.get("name", f"m{i}"), (*path, "name")),
-        nodes=tuple(r.text(n, (*path, "nodes")) for n in nodes),
-        section=r.text(r.need(t, "section", path), (*path, "section")),
-        material=r.text(r.need(t, "material", path), (*path, "material")),
-        elements=elements,
-        max_element_length_m=max_len,
-        nsm_kg_per_m=r.coef(t.get("nsm", 0.0), (*path, "nsm")),
-        group=r.text(t.get("group", "frame"), (*path, "group")),
-    )
-
-
-def _joint(r: _Reader, t: dict, path: KeyPath, i: int) -> Joint:
-    r.table(t, path, {"name", "nodes", *DIRECTIONS})
-    conn = {}
-    for d in DIRECTIONS:
-        v = t.get(d, "rigid")
-        if isinstance(v, dict):
-            v = r.need(r.table(v, (*path, d), {"k"}), "k", (*path, d))
-        conn[d] = r.coef(v, (*path, d))
-    nodes = r.array(r.need(t, "nodes", path), (*path, "nodes"))
-    if len(nodes) != 2:
-        r.fail((*path, "nodes"), f"need two nodes, got {nodes!r}")
-    name = r.text(t.get("name", f"joint{i}"), (*path, "name"))
-    return Joint(name=name, nodes=tuple(r.text(n, (*path, "nodes")) for n in nodes), **conn)
 
 
 def _nodes(r: _Reader, doc: dict) -> dict[str, tuple[float, ...]]:
@@ -446,40 +400,16 @@ def _rows(r: _Reader, doc: dict, key: str) -> list[tuple[KeyPath, dict]]:
     return [((key, i), r.table(t, (key, i))) for i, t in enumerate(rows)]
 
 
-def _spring(r: _Reader, t: dict, p: KeyPath, i: int) -> Spring:
-    r.table(t, p, {"name", "node", "direction", "k", "to"})
-    to = t.get("to")
-    return Spring(
-        name=r.text(t.get("name", f"spring{i}"), (*p, "name")),
-        node=r.text(r.need(t, "node", p), (*p, "node")),
-        direction=r.direction(r.need(t, "direction", p), (*p, "direction")),
-        k=r.coef(r.need(t, "k", p), (*p, "k")),
-        to=None if to is None else r.text(to, (*p, "to")),
-    )
-
-
-def _mass(r: _Reader, t: dict, p: KeyPath, i: int) -> LumpedMass:
-    r.table(t, p, {"name", "node", "m", "J", "group"})
-    return LumpedMass(
-        name=r.text(t.get("name", f"mass{i}"), (*p, "name")),
-        node=r.text(r.need(t, "node", p), (*p, "node")),
-        m_kg=r.coef(r.need(t, "m", p), (*p, "m")),
-        J_kgm2=r.coef(t.get("J", 0.0), (*p, "J")),
-        group=r.text(t.get("group", "lumped"), (*p, "group")),
-    )
+def _records(r: _Reader, doc: dict, key: str, cls: type[T], name: str) -> tuple[T, ...]:
+    """The records of the array ``key``; a record without a name is called ``<name><index>``."""
+    return tuple(r.build(cls, {"name": f"{name}{p[1]}", **t}, p) for p, t in _rows(r, doc, key))
 
 
 def _frame(r: _Reader, doc: dict) -> FrameSpec:
-    sections = {
-        n: _section(r, r.table(t, ("sections", n)), ("sections", n))
-        for n, t in r.table(doc.get("sections", {}), ("sections",)).items()
-    }
-    materials = {}
-    for n, t in r.table(doc.get("materials", {}), ("materials",)).items():
-        p = ("materials", n)
-        r.table(t, p, {"E", "rho"})
-        E, rho = (r.coef(r.need(t, k, p), (*p, k)) for k in ("E", "rho"))
-        materials[n] = Material(E=E, rho=rho)
+    sections, materials = (
+        {n: r.build(cls, t, (key, n)) for n, t in r.table(doc.get(key, {}), (key,)).items()}
+        for key, cls in (("sections", Section), ("materials", Material))
+    )
     supports = {}
     for node, dirs in r.table(doc.get("supports", {}), ("supports",)).items():
         dirs = list(DIRECTIONS) if dirs == "all" else r.array(dirs, ("supports", node))
@@ -488,10 +418,10 @@ def _frame(r: _Reader, doc: dict) -> FrameSpec:
         nodes=_nodes(r, doc),
         sections=sections,
         materials=materials,
-        members=tuple(_member(r, t, p, p[1]) for p, t in _rows(r, doc, "members")),
-        joints=tuple(_joint(r, t, p, p[1]) for p, t in _rows(r, doc, "joints")),
-        springs=tuple(_spring(r, t, p, p[1]) for p, t in _rows(r, doc, "springs")),
-        masses=tuple(_mass(r, t, p, p[1]) for p, t in _rows(r, doc, "masses")),
+        members=_records(r, doc, "members", Member, "m"),
+        joints=_records(r, doc, "joints", Joint, "joint"),
+        springs=_records(r, doc, "springs", Spring, "spring"),
+        masses=_records(r, doc, "masses", LumpedMass, "mass"),
         supports=supports,
     )
 
@@ -541,28 +471,23 @@ def _points(r: _Reader, doc: dict, dirs: tuple[str, ...]) -> dict[int, Measureme
 
 
 def _linear_part(r: _Reader, t: dict, base: Path) -> LinearPartSpec:
-    p: KeyPath = ("linear_part",)
-    r.table(t, p, {"format", "file", "files", "dof_map", "masses"})
-    fmt = r.text(r.need(t, "format", p), (*p, "format"))
-    if fmt not in FORMATS:
-        r.fail((*p, "format"), f"unknown format {fmt!r}; expected one of {FORMATS}")
-    if fmt == "mtx":
-        files = r.table(r.need(t, "files", p), (*p, "files"), {"M", "K", "C"})
-        for k in ("M", "K"):
-            r.need(files, k, (*p, "files"))
-    else:
-        files = {"file": r.need(t, "file", p)}
-    files = {k: str((base / r.text(v, (*p, k))).resolve()) for k, v in files.items()}
-    dof_map = t.get("dof_map")
-    if isinstance(dof_map, str):
-        dof_map = str((base / dof_map).resolve())
-    elif dof_map is not None:
-        dof_map = tuple(r.text(s, (*p, "dof_map")) for s in r.array(dof_map, (*p, "dof_map")))
-    elif fmt == "mtx":
-        r.fail((*p, "dof_map"), "missing (a file name or a list of 'node/direction')")
-    masses = r.table(t.get("masses", {}), (*p, "masses"))
-    masses = {n: r.finite(m, (*p, "masses", n)) for n, m in masses.items()}
-    return LinearPartSpec(format=fmt, files=files, dof_map=dof_map, masses=masses)
+    """The file's ``file`` is ``files = {file = ...}`` of an archive; relative file names are
+    found beside the model file."""
+    data = {k: v for k, v in t.items() if k != "file"}
+    if t.get("format") != "mtx":
+        data["files"] = {"file": t["file"]} if "file" in t else {}
+    try:
+        spec = r.build(LinearPartSpec, data, ("linear_part",))
+    except ModelFileError as exc:
+        if exc.path[:3] == ("linear_part", "files", "file"):  # the file's key is 'file'
+            r.fail(("linear_part", "file"), exc.problem)
+        raise
+    dof_map = spec.dof_map
+    return dataclasses.replace(
+        spec,
+        files={k: str((base / v).resolve()) for k, v in spec.files.items()},
+        dof_map=str((base / dof_map).resolve()) if isinstance(dof_map, str) else dof_map,
+    )
 
 
 def _damping(r: _Reader, t: dict, base: Path) -> DampingSpec:

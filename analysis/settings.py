@@ -105,8 +105,16 @@ class ConfigError(ValueError):
 
 
 #: The configuration of every settings class: unknown keys are errors (a misspelt key is not a
-#: silently ignored setting), numbers must be finite.
-SETTINGS = ConfigDict(extra="forbid", allow_inf_nan=False, validate_default=True)
+#: silently ignored setting), numbers must be finite. A field may be declared with a shorter
+#: file key (``validation_alias`` and ``serialization_alias``, ``b`` for ``b_m``): Python code
+#: passes the field's name, :func:`build` reads only the file key and :func:`dump` writes it.
+SETTINGS = ConfigDict(
+    extra="forbid",
+    allow_inf_nan=False,
+    validate_default=True,
+    validate_by_name=True,
+    validate_by_alias=True,
+)
 
 # Scalars are strict (TOML's "2" is not the number 2, true is not 1; an integer is a number);
 # arrays are lax so that Python callers may pass lists.
@@ -118,9 +126,11 @@ Positive = Annotated[Number, Field(gt=0)]
 NonNegative = Annotated[Number, Field(ge=0)]
 
 
-def declare(doc: str, default: Any = ..., **bounds: Any) -> Any:
-    """A declared setting's default (``...``: required), one-line doc and bounds
-    (``gt``, ``ge``, ``lt``, ``le``, ``min_length``)."""
+def declare(doc: str, default: Any = ..., key: str | None = None, **bounds: Any) -> Any:
+    """A declared setting's default (``...``: required), one-line doc, file key (``None``: the
+    field's name) and bounds (``gt``, ``ge``, ``lt``, ``le``, ``min_length``)."""
+    if key is not None:
+        bounds |= {"validation_alias": key, "serialization_alias": key}
     return Field(default, description=doc, **bounds)
 
 
@@ -169,6 +179,7 @@ _PROBLEMS = {
     "tuple_type": "expected an array, got {input!r}",
     "too_short": "expected at least {min_length} entries, got {input!r}",
     "dataclass_type": "expected a table, got {input!r}",
+    "dict_type": "expected a table, got {input!r}",
     "dataclass_exact_type": "expected a table, got {input!r}",
 }
 
@@ -180,7 +191,8 @@ def _problem(err: Mapping[str, Any]) -> str:
     return template.format(input=err.get("input"), **err.get("ctx", {}))
 
 
-def _first_error(cls: type, exc: _ValidationError) -> ConfigError:
+def _first_error(cls: type, exc: _ValidationError, file: bool = False) -> ConfigError:
+    """The first problem of ``exc``; ``file``: located by file keys rather than field names."""
     errors = exc.errors()
     unknown = [e for e in errors if e["type"] in ("unexpected_keyword_argument", "extra_forbidden")]
     if unknown:
@@ -192,11 +204,12 @@ def _first_error(cls: type, exc: _ValidationError) -> ConfigError:
         return ConfigError("", table, problem)
     err = errors[0]
     # a table's key is located as (..., key, "[key]"): the key is the location
-    path: KeyPath = _file_path(cls, tuple(p for p in err["loc"] if p != "[key]"))
+    loc: KeyPath = tuple(p for p in err["loc"] if p != "[key]")
+    path = _file_path(cls, loc)
     cause: BaseException | None = None
     if err["type"] in ("value_error", "assertion_error"):
         where, problem, cause = _value_error(err)
-        path = path + where
+        path = _file_path(cls, loc + where) if file else path + where
     else:
         problem = _problem(err)
     error = ConfigError("", path, problem)
@@ -252,16 +265,16 @@ def build(
     if not isinstance(data, Mapping):
         raise error(source, at, f"expected a table, got {data!r}")
     try:
-        return _adapter(cls).validate_python(dict(data))
+        return _adapter(cls).validate_python(dict(data), by_name=False)
     except _ValidationError as exc:
-        first = _first_error(cls, exc)
+        first = _first_error(cls, exc, file=True)
         raise error(source, (*at, *first.path), first.problem) from first.__cause__
 
 
 def dump(value: Any) -> dict[str, Any]:
     """The plain data of a settings object (lists, strings, numbers; unset optionals left
     out), as :func:`build` reads it back."""
-    return _adapter(type(value)).dump_python(value, mode="json", exclude_none=True)
+    return _adapter(type(value)).dump_python(value, mode="json", exclude_none=True, by_alias=True)
 
 
 # ------------------------------------------------------------------------ declarations
@@ -269,7 +282,7 @@ def dump(value: Any) -> dict[str, Any]:
 
 @dataclass(frozen=True)
 class DeclaredField:
-    """One declared setting: its name, kind, choices, default and one-line doc.
+    """One declared setting: its name, kind, choices, default, one-line doc and file key.
 
     ``kind`` is ``number``, ``integer``, ``flag``, ``text``, ``choice``, ``numbers``,
     ``integers``, ``words`` (orders), ``table`` or ``rows`` (an array of tables); ``of`` is the
@@ -282,6 +295,11 @@ class DeclaredField:
     default: Any
     choices: tuple[str, ...] = ()
     of: type | None = None
+    key: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.key:
+            object.__setattr__(self, "key", self.name)
 
 
 def _strip(annotation: Any) -> Any:
@@ -317,20 +335,28 @@ def declared_fields(cls: type) -> list[DeclaredField]:
     for name, info in cls.__pydantic_fields__.items():  # type: ignore[attr-defined]
         kind, choices, of = _kind(info.rebuild_annotation())
         default = None if info.is_required() else info.get_default(call_default_factory=True)
-        out.append(DeclaredField(name, kind, info.description or "", default, choices, of))
+        key = info.validation_alias if isinstance(info.validation_alias, str) else name
+        out.append(DeclaredField(name, kind, info.description or "", default, choices, of, key))
     return out
 
 
+def _field(cls: type, part: str) -> DeclaredField | None:
+    """The field of ``cls`` named ``part`` or read from the file key ``part``."""
+    return next((f for f in declared_fields(cls) if part in (f.name, f.key)), None)
+
+
 def _file_path(cls: type, loc: KeyPath) -> KeyPath:
-    """A location in the objects as a key path in the file (flattened tables left out)."""
+    """A location in the objects as a key path in the file (flattened tables left out, fields
+    named by their file keys)."""
     out: list[str | int] = []
     for part in loc:
         if isinstance(part, int) or cls is None:
             out.append(part)
             continue
+        found = _field(cls, str(part))
         if part not in getattr(cls, "__flattened__", {}):
-            out.append(part)
-        cls = {f.name: f.of for f in declared_fields(cls)}.get(str(part))  # type: ignore[assignment]
+            out.append(part if found is None else found.key)
+        cls = None if found is None else found.of  # type: ignore[assignment]
     return tuple(out)
 
 
@@ -344,9 +370,9 @@ def _known_keys(cls: type, table: KeyPath) -> list[str]:
             return []
         cls = found
     hidden = getattr(cls, "__flattened__", {})
-    names = [f.name for f in declared_fields(cls) if f.name not in hidden]
+    names = [f.key for f in declared_fields(cls) if f.name not in hidden]
     for inner in hidden.values():
-        names += [f.name for f in declared_fields(inner) if f.name not in _set_elsewhere(cls)]
+        names += [f.key for f in declared_fields(inner) if f.name not in _set_elsewhere(cls)]
     return sorted(names)
 
 

@@ -19,7 +19,14 @@ from typing import ClassVar
 
 import numpy as np
 
-__all__ = ["ELEMENT_TYPES", "ElementEval", "NonlinearElement", "make_element", "register"]
+__all__ = [
+    "ELEMENT_TYPES",
+    "ElementEval",
+    "ElementParameterError",
+    "NonlinearElement",
+    "make_element",
+    "register",
+]
 
 ELEMENT_TYPES: dict[str, type[NonlinearElement]] = {}
 
@@ -49,8 +56,18 @@ def register(cls: type[NonlinearElement]) -> type[NonlinearElement]:
     return cls
 
 
-def _as_number(kind: str, label: str, value: object) -> float:
-    """``value`` as a finite float; booleans and strings are refused."""
+class ElementParameterError(ValueError):
+    """A parameter or option an element refuses (unknown, missing or a bad value); its name is
+    :attr:`parameter`, so that a model file can locate the error at the key that gives it."""
+
+    def __init__(self, parameter: str, message: str) -> None:
+        super().__init__(message)
+        self.parameter = parameter
+
+
+def _as_number(kind: str, what: str, name: str, value: object) -> float:
+    """``value`` of the parameter or option (``what``) ``name`` as a finite float; booleans
+    and strings are refused."""
     if not isinstance(value, bool | np.bool_ | str | bytes):
         try:
             x = float(value)  # type: ignore[arg-type]
@@ -58,9 +75,13 @@ def _as_number(kind: str, label: str, value: object) -> float:
             pass
         else:
             if not np.isfinite(x):
-                raise ValueError(f"element {kind!r}: {label} is not finite, got {value!r}")
+                raise ElementParameterError(
+                    name, f"element {kind!r}: {what} {name!r} is not finite, got {value!r}"
+                )
             return x
-    raise ValueError(f"element {kind!r}: {label} must be a number, got {value!r}")
+    raise ElementParameterError(
+        name, f"element {kind!r}: {what} {name!r} must be a number, got {value!r}"
+    )
 
 
 @dataclass(frozen=True)
@@ -130,23 +151,30 @@ class NonlinearElement:
     def __init__(self, **values: float) -> None:
         unknown = set(values) - set(self.param_names) - set(self.option_names)
         if unknown:
-            raise ValueError(
+            raise ElementParameterError(
+                sorted(unknown)[0],
                 f"element {self.kind!r}: unknown parameter(s) {sorted(unknown)}; "
                 f"expected {list(self.param_names)}"
-                + (f" and options {list(self.option_names)}" if self.option_names else "")
+                + (f" and options {list(self.option_names)}" if self.option_names else ""),
             )
         values = {**self.param_defaults, **values}
         missing = [n for n in self.param_names if n not in values]
         if missing:
-            raise ValueError(f"element {self.kind!r}: missing parameter(s) {missing}")
+            raise ElementParameterError(
+                missing[0], f"element {self.kind!r}: missing parameter(s) {missing}"
+            )
         self._p = np.array(
-            [_as_number(self.kind, f"parameter {n!r}", values[n]) for n in self.param_names]
+            [_as_number(self.kind, "parameter", n, values[n]) for n in self.param_names]
         )
         for n, x in self.params.items():
             if n in self.positive_params and not x > 0:
-                raise ValueError(f"element {self.kind!r}: parameter {n!r} must be > 0, got {x}")
+                raise ElementParameterError(
+                    n, f"element {self.kind!r}: parameter {n!r} must be > 0, got {x}"
+                )
             if n in self.nonnegative_params and not x >= 0:
-                raise ValueError(f"element {self.kind!r}: parameter {n!r} must be >= 0, got {x}")
+                raise ElementParameterError(
+                    n, f"element {self.kind!r}: parameter {n!r} must be >= 0, got {x}"
+                )
         self.options = {k: values.get(k, d) for k, d in self.option_names.items()}
         self._validate()
 
@@ -169,7 +197,7 @@ class NonlinearElement:
 
     def _option_number(self, name: str) -> float:
         """Option ``name`` as a finite float, or ``ValueError`` naming it."""
-        return _as_number(self.kind, f"option {name!r}", self.options[name])
+        return _as_number(self.kind, "option", name, self.options[name])
 
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
         raise NotImplementedError

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import ElementEval, NonlinearElement, register
+from .base import ElementEval, ElementParameterError, NonlinearElement, register
 
 __all__ = ["CoulombFriction"]
 
@@ -37,7 +37,9 @@ class CoulombFriction(NonlinearElement):
     def _validate(self) -> None:
         v_reg = self._option_number("v_reg")
         if not v_reg > 0:
-            raise ValueError(f"element {self.kind!r}: option 'v_reg' must be > 0, got {v_reg}")
+            raise ElementParameterError(
+                "v_reg", f"element {self.kind!r}: option 'v_reg' must be > 0, got {v_reg}"
+            )
         self.options["v_reg"] = v_reg
 
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:

@@ -10,7 +10,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .base import ElementEval, NonlinearElement, register
+from .base import ElementEval, ElementParameterError, NonlinearElement, register
 
 __all__ = ["BilinearSpring", "GapSpring", "OneSidedStop", "TwoSidedGap", "penetration"]
 
@@ -55,9 +55,10 @@ class OneSidedStop(NonlinearElement):
     def _validate(self) -> None:
         side = self._option_number("side")
         if side not in (-1.0, 1.0):
-            raise ValueError(
+            raise ElementParameterError(
+                "side",
                 f"element {self.kind!r}: option 'side' must be -1 (stop below) or +1 "
-                f"(stop above), got {self.options['side']!r}"
+                f"(stop above), got {self.options['side']!r}",
             )
         self.options["side"] = int(side)
 

@@ -17,13 +17,15 @@ from __future__ import annotations
 
 import logging
 import math
+import typing
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..settings import KeyPath, SettingError, dotted
+from ..settings import Integer, KeyPath, SettingError, Text, declare, dotted, settings
 from .beam import Section, mass_matrix, stiffness_matrix
+from .values import DIRECTIONS, Coefficient, Connection, Direction, Finite
 
 __all__ = [
     "DIRECTIONS",
@@ -41,10 +43,8 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-DIRECTIONS = ("x", "y", "rz")
 JOINT_CONNECTIONS = ("rigid", "free")
 GEOMETRY_TOL_M = 1e-6
-Coefficient = float | str  # a number or the name of a parameter
 Dof = tuple[str, str]
 
 
@@ -57,36 +57,36 @@ class SpecError(ValueError):
         super().__init__(f"{dotted(self.path)}: {problem}" if self.path else problem)
 
 
-@dataclass(frozen=True)
+@settings()
 class Material:
-    """Young's modulus ``E`` [Pa] and density ``rho`` [kg/m^3], numbers or parameter names."""
+    """A material: Young's modulus and density, numbers or parameter names."""
 
-    E: Coefficient
-    rho: Coefficient
+    E: Coefficient = declare("Young's modulus [Pa].")
+    rho: Coefficient = declare("Density [kg/m^3].")
 
 
-@dataclass(frozen=True)
+@settings()
 class Member:
     """A straight member between two nodes, meshed with ``elements`` in total or elements no
     longer than ``max_element_length_m`` on each stretch between the nodes lying on it."""
 
-    name: str
-    nodes: tuple[str, str]
-    section: str
-    material: str
-    elements: int | None = None
-    max_element_length_m: float | None = None
-    nsm_kg_per_m: Coefficient = 0.0
-    group: str = "frame"
+    name: Text = declare("Member name, unique in the frame.")
+    nodes: tuple[Text, ...] = declare("The two end nodes.")
+    section: Text = declare("Section name.")
+    material: Text = declare("Material name.")
+    elements: Integer | None = declare("Number of elements of the whole member.", None)
+    max_element_length_m: Finite | None = declare(
+        "Longest element [m] (instead of elements).", None, key="max_element_length"
+    )
+    nsm_kg_per_m: Coefficient = declare("Non-structural mass [kg/m].", 0.0, key="nsm")
+    group: Text = declare("Mass group (the mass report's).", "frame")
 
     def __post_init__(self) -> None:
         if len(self.nodes) != 2 or self.nodes[0] == self.nodes[1]:
             raise SettingError(("nodes",), f"need two different nodes, got {self.nodes!r}")
         if (self.elements is None) == (self.max_element_length_m is None):
             raise SettingError((), "give exactly one of 'elements' and 'max_element_length'")
-        if self.elements is not None and not (
-            isinstance(self.elements, int) and self.elements >= 1
-        ):
+        if self.elements is not None and not self.elements >= 1:
             raise SettingError(("elements",), f"must be a positive integer, got {self.elements!r}")
         if self.max_element_length_m is not None and not self.max_element_length_m > 0:
             raise SettingError(
@@ -94,41 +94,45 @@ class Member:
             )
 
 
-@dataclass(frozen=True)
+@settings()
 class Joint:
     """Connection of two coincident nodes: per direction ``"rigid"`` (tied), ``"free"`` or a
     spring stiffness (N/m or N m/rad; a number or a parameter name)."""
 
-    name: str
-    nodes: tuple[str, str]
-    x: Coefficient = "rigid"
-    y: Coefficient = "rigid"
-    rz: Coefficient = "rigid"
+    name: Text = declare("Joint name, unique in the frame.")
+    nodes: tuple[Text, ...] = declare("The two coincident nodes.")
+    x: Connection = declare("Connection in x: rigid, free or a stiffness [N/m].", "rigid")
+    y: Connection = declare("Connection in y: rigid, free or a stiffness [N/m].", "rigid")
+    rz: Connection = declare("Connection in rz: rigid, free or a stiffness [N m/rad].", "rigid")
+
+    def __post_init__(self) -> None:
+        if len(self.nodes) != 2:
+            raise SettingError(("nodes",), f"need two nodes, got {list(self.nodes)!r}")
 
     def connection(self, direction: str) -> Coefficient:
-        return getattr(self, direction)
+        return typing.cast(Coefficient, getattr(self, direction))
 
 
-@dataclass(frozen=True)
+@settings()
 class Spring:
     """Linear spring in one direction from ``node`` to ground, or to node ``to``."""
 
-    name: str
-    node: str
-    direction: str
-    k: Coefficient
-    to: str | None = None
+    name: Text = declare("Spring name.")
+    node: Text = declare("Node.")
+    direction: Direction = declare("Direction.")
+    k: Coefficient = declare("Stiffness [N/m or N m/rad].")
+    to: Text | None = declare("Other node (none: ground).", None)
 
 
-@dataclass(frozen=True)
+@settings()
 class LumpedMass:
     """Point mass ``m_kg`` (x and y) and rotary inertia ``J_kgm2`` (rz) at a node."""
 
-    name: str
-    node: str
-    m_kg: Coefficient
-    J_kgm2: Coefficient = 0.0
-    group: str = "lumped"
+    name: Text = declare("Mass name.")
+    node: Text = declare("Node.")
+    m_kg: Coefficient = declare("Mass in x and y [kg].", key="m")
+    J_kgm2: Coefficient = declare("Rotary inertia in rz [kg m^2].", 0.0, key="J")
+    group: Text = declare("Mass group (the mass report's).", "lumped")
 
 
 @dataclass(frozen=True)

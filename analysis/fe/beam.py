@@ -15,44 +15,32 @@ J.S. Przemieniecki, *Theory of Matrix Structural Analysis*, McGraw-Hill, 1968, c
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
-from ..settings import SettingError
+from ..settings import SettingError, Text, declare, settings
+from .values import Finite
 
 __all__ = ["SECTION_SHAPES", "Section", "mass_matrix", "rotation_matrix", "stiffness_matrix"]
 
 SECTION_SHAPES = ("rect", "rect_tube", "general")
 
 
-@dataclass(frozen=True)
+@settings()
 class Section:
-    """Cross-section of a frame member.
+    """Cross-section of a frame member: ``rect`` (solid rectangle ``b x h``, ``h`` in the
+    bending direction), ``rect_tube`` (square hollow tube) or ``general`` (area and second
+    moment given directly; computed for the other shapes)."""
 
-    Parameters
-    ----------
-    shape : {"rect", "rect_tube", "general"}
-        ``rect``: solid rectangle ``b x h`` (``h`` in the bending direction);
-        ``rect_tube``: square hollow tube with side ``outer_m`` and wall ``wall_m``;
-        ``general``: ``area_m2`` and ``inertia_m4`` given directly.
-    b_m, h_m : float
-        Width and height of a solid rectangle [m].
-    outer_m, wall_m : float
-        Outer side and wall thickness of a square tube [m].
-    area_m2 : float
-        Area [m^2] (``general`` only; computed for the other shapes).
-    inertia_m4 : float
-        Second moment of area about the bending axis [m^4] (``general`` only).
-    """
-
-    shape: str
-    b_m: float | None = None
-    h_m: float | None = None
-    outer_m: float | None = None
-    wall_m: float | None = None
-    area_m2: float | None = None
-    inertia_m4: float | None = None
+    shape: Text = declare(f"Shape: one of {', '.join(SECTION_SHAPES)}.", "general")
+    b_m: Finite | None = declare("Width of a solid rectangle [m].", None, key="b")
+    h_m: Finite | None = declare("Height of a solid rectangle [m].", None, key="h")
+    outer_m: Finite | None = declare("Outer side of a square tube [m].", None, key="outer")
+    wall_m: Finite | None = declare("Wall thickness of a square tube [m].", None, key="wall")
+    area_m2: Finite | None = declare("Area [m^2] (general only).", None, key="A")
+    inertia_m4: Finite | None = declare(
+        "Second moment about the bending axis [m^4].", None, key="I"
+    )
 
     def __post_init__(self) -> None:
         needed = {
