@@ -14,6 +14,7 @@ decorate the class with :func:`register`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -21,6 +22,7 @@ import numpy as np
 
 __all__ = [
     "ELEMENT_TYPES",
+    "CompiledLaw",
     "ElementEval",
     "ElementParameterError",
     "NonlinearElement",
@@ -29,6 +31,9 @@ __all__ = [
 ]
 
 ELEMENT_TYPES: dict[str, type[NonlinearElement]] = {}
+
+#: ``law(u, v, p) -> (f, df_du, df_dv)`` compiled with numba (see ``compiled_law``).
+CompiledLaw = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, ...]]
 
 
 def register(cls: type[NonlinearElement]) -> type[NonlinearElement]:
@@ -186,6 +191,16 @@ class NonlinearElement:
         paper's contact: its damping term jumps at entry and exit); continuous laws, kinks
         included, return ``None``. The balance integrates such jumps exactly between AFT
         samples (:mod:`analysis.mhb.aft`), which keeps its residual continuous.
+        """
+        return None
+
+    def compiled_law(self) -> tuple[CompiledLaw, np.ndarray] | None:
+        """The law compiled with numba, for the balance's compiled AFT, or ``None``.
+
+        ``(law, p)`` where ``law(u, v, p)`` takes 1-D float arrays ``u``, ``v`` and returns
+        ``f, df_du, df_dv`` (1-D, the values :meth:`evaluate` gives), ``p`` a float array of
+        whatever settings the law needs. Without one the balance evaluates the law through
+        :meth:`evaluate` (numpy).
         """
         return None
 

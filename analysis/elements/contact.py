@@ -2,12 +2,32 @@
 
 from __future__ import annotations
 
-import numpy as np
+from functools import cached_property
 
-from .base import ElementEval, register
+import numpy as np
+from numba import njit
+
+from .base import CompiledLaw, ElementEval, register
 from .gaps import OneSidedStop, penetration
 
 __all__ = ["HertzContact"]
+
+
+@njit(cache=True)
+def _hertz_law(u, vel, p):
+    """``f``, ``df_du``, ``df_dvel`` of the law at samples ``u``, ``vel`` for
+    ``p = (k_c, gap, v, side)``, in the order of operations of the array code."""
+    k_c, gap, c, side = p[0], p[1], p[2], p[3]
+    n = u.size
+    f, df_du, df_dvel = np.zeros(n), np.zeros(n), np.zeros(n)
+    for m in range(n):
+        if side * u[m] > gap:
+            d = side * u[m] - gap
+            root = np.sqrt(d)
+            f[m] = -side * k_c * d * root - c * (vel[m] * abs(vel[m]))
+            df_du[m] = -1.5 * k_c * root
+            df_dvel[m] = -2.0 * c * abs(vel[m])
+    return f, df_du, df_dvel
 
 
 @register
@@ -66,16 +86,27 @@ class HertzContact(OneSidedStop):
         """The damping term jumps at ``u = side * gap``."""
         return self.side * self._p[1], np.array([0.0, float(self.side), 0.0])
 
+    def compiled_law(self) -> tuple[CompiledLaw, np.ndarray]:
+        """Numba code of the law (the balance evaluates it some thousand times per sweep,
+        mostly on a few hundred samples, where numpy's per-call overhead dominates); the
+        array code below gives the parameter derivatives and is its reference."""
+        return _hertz_law, self._law_p
+
+    @cached_property
+    def _law_p(self) -> np.ndarray:
+        return np.append(self._p, float(self.side))
+
     def _evaluate(self, u: np.ndarray, vel: np.ndarray, want_params: bool) -> ElementEval:
-        k_c, _, c = self._p
+        if not want_params:
+            law, p = self.compiled_law()
+            return ElementEval(*(a.reshape(u.shape) for a in law(u.ravel(), vel.ravel(), p)))
+        k_c, gap, c = self._p
         side = self.side
-        in_contact, d = penetration(u, self._p[1], side)
+        in_contact, d = penetration(u, gap, side)
         root = np.sqrt(d)
         damping = np.where(in_contact, vel * np.abs(vel), 0.0)
         f = -side * k_c * d * root - c * damping
         df_du = -1.5 * k_c * root
         df_dvel = np.where(in_contact, -2.0 * c * np.abs(vel), 0.0)
-        if not want_params:
-            return ElementEval(f, df_du, df_dvel)
         df_dp = np.stack([-side * d * root, 1.5 * side * k_c * root, -damping])
         return ElementEval(f, df_du, df_dvel, df_dp)

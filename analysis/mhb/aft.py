@@ -27,6 +27,7 @@ from analysis.mhb.harmonics import HarmonicBasis
 __all__ = ["element_forces", "nonlinear_forces", "parameter_forces"]
 
 _NONE = np.zeros((0, 0))  # a derivative not wanted (the kernels skip size-0 arrays)
+_NO_PARAMS = np.zeros(0)
 
 
 @njit(cache=True)
@@ -127,6 +128,79 @@ def _add_jumps(w, rows, up, upp, offset, J, dJ_dvel, dJ_dp, dus_dp, F, D, dFp):
                 dFp[i, p] += w[i] * (e[i] * a + de[i] * b)
 
 
+@njit(cache=True)
+def _project(P, E, dE, f, df_du, df_dv, D):
+    """``F = P f`` and, unless ``D`` has size 0, ``D = P diag(df_du) E + P diag(df_dv) dE``
+    (``D`` zeroed on entry), over the samples where the law acts: a clearance law is zero on
+    most of the period, where dense products would multiply zeros."""
+    s, N = P.shape
+    F = np.zeros(s)
+    row = np.empty(E.shape[1])
+    jac = D.size > 0
+    for m in range(N):
+        if f[m] == 0.0 and df_du[m] == 0.0 and df_dv[m] == 0.0:
+            continue
+        for i in range(s):
+            F[i] += P[i, m] * f[m]
+        if jac:
+            for j in range(row.size):
+                row[j] = df_du[m] * E[m, j] + df_dv[m] * dE[m, j]
+            for i in range(s):
+                for j in range(row.size):
+                    D[i, j] += P[i, m] * row[j]
+    return F
+
+
+@njit(cache=True)
+def _jump_sides(u_t, v_t, idx, up, u_s, omega_b):
+    """The samples followed by both sides of every jump (just after, then just before the
+    crossing ``idx``), to evaluate the law at all of them at once."""
+    N, nc = u_t.size, idx.size
+    eps = 1e-9 * max(abs(u_s), np.abs(u_t).max(), 1e-300)
+    u = np.empty(N + 2 * nc)
+    v = np.empty(N + 2 * nc)
+    u[:N], v[:N] = u_t, v_t
+    for c in range(nc):
+        after = 1.0 if u_t[(idx[c] + 1) % N] > u_s else -1.0
+        u[N + c], u[N + nc + c] = u_s + after * eps, u_s - after * eps
+        v[N + c] = v[N + nc + c] = omega_b * up[c]
+    return u, v
+
+
+@njit(cache=True)
+def _compiled_forces(law, p, EdE, P, E, dE, tau, k, jw, Ue, omega_b, u_s, dus_dp, D):
+    """:func:`element_forces` without parameter derivatives for a law compiled with numba
+    (``u_s`` NaN: no jump), in one call; ``D`` (zeroed) receives ``dF/dUe`` unless of size 0."""
+    N = tau.size
+    uv = EdE @ Ue
+    u_t, v_t = uv[:N].copy(), omega_b * uv[N:]
+    nc = 0
+    if not np.isnan(u_s):
+        idx, t, rows, up, upp = _locate_jumps(tau, k, Ue, u_t, u_s)
+        nc = idx.size
+        if nc:
+            u_t, v_t = _jump_sides(u_t, v_t, idx, up, u_s, omega_b)
+    f, df_du, df_dv = law(u_t, v_t, p)
+    F = _project(P, E, dE, f[:N], df_du[:N], omega_b * df_dv[:N], D)
+    if nc:
+        hi, lo = slice(N, N + nc), slice(N + nc, N + 2 * nc)
+        _add_jumps(
+            jw,
+            rows,
+            up,
+            upp,
+            t - (tau[idx] + np.pi / N),
+            f[hi] - f[lo],
+            omega_b * (df_dv[hi] - df_dv[lo]),
+            np.zeros((nc, 0)),
+            dus_dp,
+            F,
+            D,
+            np.zeros((0, 0)),
+        )
+    return F
+
+
 def element_forces(
     b: HarmonicBasis,
     element,
@@ -154,10 +228,32 @@ def element_forces(
     dFp : ndarray, shape (2H+1, n_params) or None
         ``dF/dp`` (with ``want_params``).
     """
+    compiled = None if want_params else element.compiled_law()
+    sw = element.switch_threshold()
+    if compiled is not None:
+        D = np.zeros((b.size, b.size)) if jacobian else None
+        u_s, dus_dp = (np.nan, _NO_PARAMS) if sw is None else sw
+        law, p = compiled
+        F = _compiled_forces(
+            law,
+            p,
+            b.EdE,
+            b.P,
+            b.E,
+            b.dE,
+            b.tau,
+            b.k,
+            b.jump_weights,
+            np.ascontiguousarray(Ue, dtype=float),
+            float(omega_b),
+            float(u_s),
+            np.asarray(dus_dp, dtype=float),
+            _NONE if D is None else D,
+        )
+        return F, D, None
     N = b.n_time
     uv = b.EdE @ Ue
     u_t, v_t = uv[:N], omega_b * uv[N:]
-    sw = element.switch_threshold()
     nc = 0
     if sw is not None:
         u_s, dus_dp = sw
@@ -171,10 +267,10 @@ def element_forces(
             u_t = np.concatenate([u_t, u_s + after * eps, u_s - after * eps])
             v_t = np.concatenate([v_t, vs, vs])
     ev = element.evaluate(u_t, v_t, want_params)
-    F = b.P @ ev.f[:N]
-    D = None
-    if jacobian:
-        D = (b.PP * np.concatenate([ev.df_du[:N], omega_b * ev.df_dv[:N]])) @ b.EdE
+    D = np.zeros((b.size, b.size)) if jacobian else None
+    F = _project(
+        b.P, b.E, b.dE, ev.f[:N], ev.df_du[:N], omega_b * ev.df_dv[:N], _NONE if D is None else D
+    )
     dFp = (b.P @ ev.df_dp[:, :N].T) if want_params else None
     if nc == 0:
         return F, D, dFp

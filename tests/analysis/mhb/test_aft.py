@@ -98,3 +98,41 @@ def test_a_law_without_jumps_is_the_plain_sampled_sum():
     b = HarmonicBasis(9, 128)
     F, _, _ = element_forces(b, el, _motion(), OMEGA_B, False)
     np.testing.assert_allclose(F, _plain(b, el, _motion()), rtol=0, atol=1e-14 * np.abs(F).max())
+
+
+@pytest.mark.parametrize("side", [-1, 1])
+def test_compiled_forces_match_the_numpy_path_on_random_states(side):
+    """The compiled AFT (law, samples, jumps and projection in numba) against the numpy path
+    (taken when parameter derivatives are wanted), on random motions around the stop."""
+    rng = np.random.default_rng(7 + side)
+    el = make_element("hertz_contact", side=side, **JUMPY)
+    assert el.compiled_law() is not None
+    b = HarmonicBasis(9, 128)
+    n_jumps = 0
+    for _ in range(200):
+        Ue = rng.normal(0.0, 4e-4, b.size) / np.arange(1, b.size + 1)
+        Ue[0] += side * rng.uniform(0.0, 1e-3)
+        F, D, _ = element_forces(b, el, Ue, OMEGA_B)
+        F_np, D_np, _ = element_forces(b, el, Ue, OMEGA_B, True, want_params=True)
+        uv = b.EdE @ Ue
+        n_jumps += int(np.any(np.diff(side * uv[: b.n_time] > JUMPY["gap"])))
+        # the same arithmetic summed in another order: rounding only
+        assert np.abs(F - F_np).max() <= 1e-12 * max(np.abs(F_np).max(), 1e-300)
+        assert np.abs(D - D_np).max() <= 1e-12 * max(np.abs(D_np).max(), 1e-300)
+    assert n_jumps > 50  # the states exercise the jump integrals, not only the samples
+
+
+def test_compiled_law_is_the_array_law():
+    """The numba law against the array code (which also gives the parameter derivatives), at
+    samples in and out of contact, in any input shape."""
+    rng = np.random.default_rng(3)
+    for side in (-1, 1):
+        el = make_element("hertz_contact", side=side, **JUMPY)
+        u = rng.normal(0.0, 1e-3, (7, 9))
+        v = rng.normal(0.0, 0.2, (7, 9))
+        fast, ref = el.evaluate(u, v), el.evaluate(u, v, want_params=True)
+        assert (side * u > JUMPY["gap"]).any() and (side * u <= JUMPY["gap"]).any()
+        for a, r in ((fast.f, ref.f), (fast.df_du, ref.df_du), (fast.df_dv, ref.df_dv)):
+            assert a.shape == u.shape
+            np.testing.assert_allclose(a, r, rtol=1e-15, atol=0.0)
+        assert el.evaluate(np.float64(-1e-3), np.float64(0.1)).f.shape == ()
