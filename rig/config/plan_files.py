@@ -7,13 +7,12 @@ path. The file layout is described in :mod:`rig.config.plans`.
 
 from __future__ import annotations
 
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from rig.config.plan_types import Plan, RandomPlan, SteppedSinePlan
 from rig.config.settings import build
-from rig.config.tomlconfig import ConfigError, read_toml
+from rig.config.tomlconfig import ConfigError, builtin_files, read_named
 
 __all__ = ["builtin_plans", "describe_plan", "load_plan", "plan_from_dict"]
 
@@ -41,8 +40,7 @@ def plan_from_dict(data: dict[str, Any], source: str = "plan") -> Plan:
 
 def builtin_plans() -> dict[str, Path]:
     """Name -> file of the plans shipped in ``rig/plans``."""
-    folder = resources.files("rig") / "plans"
-    return {Path(str(p)).stem: Path(str(p)) for p in folder.iterdir() if p.name.endswith(".toml")}
+    return builtin_files("plans")
 
 
 def load_plan(name_or_path: str | Path) -> Plan:
@@ -54,19 +52,7 @@ def load_plan(name_or_path: str | Path) -> Plan:
         If the name is unknown (the message lists the built-in plans), the file cannot be read,
         or a setting is invalid (the message names the file and the key).
     """
-    text = str(name_or_path)
-    builtins = builtin_plans()
-    if text in builtins:
-        path, label = builtins[text], f"plan {text!r} ({builtins[text]})"
-    else:
-        path = Path(text)
-        if not path.exists():
-            raise ConfigError(
-                f"plan {text!r}: no such file and not a built-in plan "
-                f"(built-in: {', '.join(sorted(builtins))})"
-            )
-        label = f"plan file {path}"
-    return plan_from_dict(read_toml(path, label), label)
+    return plan_from_dict(*read_named("plan", name_or_path, builtin_plans()))
 
 
 def describe_plan(plan: Plan) -> str:

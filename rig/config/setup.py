@@ -35,7 +35,6 @@ from __future__ import annotations
 import dataclasses
 import datetime
 from collections.abc import Iterable, Mapping
-from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal, get_args
 
@@ -55,7 +54,7 @@ from rig.config.settings import (
     settings,
 )
 from rig.config.settings import declare as _doc
-from rig.config.tomlconfig import ConfigError, read_toml
+from rig.config.tomlconfig import builtin_files, read_named
 
 __all__ = [
     "AmplifierSetup",
@@ -386,8 +385,7 @@ def setup_from_dict(data: Mapping[str, Any], source: str = "setup") -> LabSetup:
 
 def builtin_setups() -> dict[str, Path]:
     """Name -> file of the setups shipped in ``rig/setups``."""
-    folder = resources.files("rig") / "setups"
-    return {Path(str(p)).stem: Path(str(p)) for p in folder.iterdir() if p.name.endswith(".toml")}
+    return builtin_files("setups")
 
 
 def load_setup(name_or_path: str | Path) -> LabSetup:
@@ -399,16 +397,4 @@ def load_setup(name_or_path: str | Path) -> LabSetup:
         If the name is unknown (the message lists the built-in ones), the file cannot be read,
         or a setting is invalid (the message names the file and the key).
     """
-    text = str(name_or_path)
-    builtins = builtin_setups()
-    if text in builtins:
-        path, label = builtins[text], f"setup {text!r} ({builtins[text]})"
-    else:
-        path = Path(text)
-        if not path.exists():
-            raise ConfigError(
-                f"setup {text!r}: no such file and not a built-in setup "
-                f"(built-in: {', '.join(sorted(builtins))})"
-            )
-        label = f"setup file {path}"
-    return setup_from_dict(read_toml(path, label), label)
+    return setup_from_dict(*read_named("setup", name_or_path, builtin_setups()))

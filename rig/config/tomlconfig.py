@@ -11,12 +11,13 @@ key path, e.g. ``plan 'paper' (rig/plans/paper.toml): excitation.levels_n[2]: mu
 from __future__ import annotations
 
 import tomllib
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from analysis.settings import ConfigError, KeyPath, dotted
 
-__all__ = ["ConfigError", "KeyPath", "dotted", "read_toml"]
+__all__ = ["ConfigError", "KeyPath", "builtin_files", "dotted", "read_named", "read_toml"]
 
 
 def read_toml(path: Path, what: str) -> dict[str, Any]:
@@ -28,3 +29,35 @@ def read_toml(path: Path, what: str) -> dict[str, Any]:
         raise ConfigError(f"{what} ({path})", (), f"not valid TOML: {exc}") from exc
     except OSError as exc:
         raise ConfigError(f"{what}: cannot read {path}: {exc.strerror or exc}") from exc
+
+
+def builtin_files(folder: str) -> dict[str, Path]:
+    """Name -> file of the TOML files shipped in ``rig/<folder>`` (``plans``, ``setups``)."""
+    root = resources.files("rig") / folder
+    return {Path(str(p)).stem: Path(str(p)) for p in root.iterdir() if p.name.endswith(".toml")}
+
+
+def read_named(
+    kind: str, name_or_path: str | Path, builtins: dict[str, Path]
+) -> tuple[dict[str, Any], str]:
+    """The document of a built-in file by name, or of a file by path, and the label its errors
+    start with (``plan 'paper' (rig/plans/paper.toml)``, ``setup file my.toml``).
+
+    Raises
+    ------
+    ConfigError
+        If the name is neither a built-in one nor an existing file (the message lists the
+        built-in ones), or the file cannot be read or parsed.
+    """
+    text = str(name_or_path)
+    if text in builtins:
+        path, label = builtins[text], f"{kind} {text!r} ({builtins[text]})"
+    else:
+        path = Path(text)
+        if not path.exists():
+            raise ConfigError(
+                f"{kind} {text!r}: no such file and not a built-in {kind} "
+                f"(built-in: {', '.join(sorted(builtins))})"
+            )
+        label = f"{kind} file {path}"
+    return read_toml(path, label), label
