@@ -56,7 +56,7 @@ check: lint
 	$(PYTEST) -m "not slow and not hardware"
 
 test: lint
-	$(PYTEST)
+	$(PYTEST) --durations=15
 
 bench: setup
 	$(PY) -m benchmarks mhb
