@@ -248,9 +248,13 @@ def augment(
     say = progress or (lambda stage, info: None)
     before = compare(model, data, predictor=_predictor(model, data, n_harmonics, n_time))
     if values is None:
-        fit = Screen(model, data, predictor=_predictor(model, data, n_harmonics, n_time)).fit(
-            candidate
+        screen = Screen(
+            model,
+            data,
+            predictor=_predictor(model, data, n_harmonics, n_time),
+            locations=(candidate.location,),
         )
+        fit = screen.fit(candidate)
         values, known = dict(fit.values), dict(fit.known) if known is None else known
         say("screen", {"values": values, "known": known})
     m2, new = _with_candidate(model, candidate, values, known)

@@ -55,7 +55,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.diagnosis.candidates import Candidate, default_candidates
+from analysis.diagnosis.candidates import Candidate, default_candidates, default_locations
 from analysis.diagnosis.compare import compare
 from analysis.diagnosis.linear_screen import LinearFit, LinearJob, run_linear_job
 from analysis.diagnosis.policy import FitSummary, Policy, simplest_of_next, tie_groups
@@ -146,7 +146,7 @@ def _run_verifications(
 
 def _screen_from(model: Model, data, st: DiagnosisSettings, pred=None) -> Screen:
     pred = pred or BranchMatchedPredictor(model, data, n_harmonics=st.n_harmonics, n_time=st.n_time)
-    return Screen(model, data, predictor=pred)
+    return Screen(model, data, predictor=pred, locations=default_locations(model, st.locations))
 
 
 def _lead(fits: list[ScreenFit]) -> ScreenFit | None:

@@ -252,7 +252,11 @@ class Screen:
         n_time: int = 128,
         predictor: BranchMatchedPredictor | None = None,
         free_parameters: Sequence[str] = (),
+        locations: Sequence[Location] = (),
     ) -> None:
+        # the receptances cover the measured scope's places and these (the candidates' own
+        # when they lie beyond it: another direction, one spring, a pair of nodes)
+        self.locations = tuple(locations)
         self.model, self.data = model, data
         self.n_iterations, self.rcond, self.n_time = n_iterations, rcond, n_time
         self.free = tuple(free_parameters)
@@ -315,7 +319,7 @@ class Screen:
     def _interesting(self, model, asm, joint=None) -> list[int]:
         atts = attachments(model)
         extra = [a.dof_a for a in atts] + [a.dof_b for a in atts if a.dof_b is not None]
-        for loc in default_locations(model):
+        for loc in (*default_locations(model), *self.locations):
             if loc.joint is None:
                 extra += [self._dof(asm, r) for inc in loc.incidences for r in inc if r]
         if joint is not None:
@@ -994,7 +998,13 @@ def screen_pass(job: ScreenJob) -> list[ScreenFit]:
     model = Model.from_toml_text(job.model_toml, job.source)
     data = read_measurement(job.data_path)
     pred = BranchMatchedPredictor(model, data, n_harmonics=job.n_harmonics, n_time=job.n_time)
-    screen = Screen(model, data, predictor=pred, free_parameters=job.free_parameters)
+    screen = Screen(
+        model,
+        data,
+        predictor=pred,
+        free_parameters=job.free_parameters,
+        locations=tuple(c.location for c in job.candidates),
+    )
     return screen.first_pass(job.candidates)
 
 

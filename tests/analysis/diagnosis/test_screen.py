@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from analysis.diagnosis import Screen, default_candidates
 
 
@@ -64,3 +66,16 @@ def test_the_upper_stop_is_found_at_the_tip(runs, reference_model) -> None:
     best = fits[0].candidate
     assert best.law.kind in ("hertz_contact", "two_sided_gap") and best.location.name == "point 7"
     assert best.law.options.get("side", 1) == 1
+
+
+def test_a_place_beyond_the_measured_scope_is_screened_when_given(runs, reference_model) -> None:
+    """A candidate at another direction of a point (structure scope) is screened by a screen
+    told its place: the receptances then cover that DOF."""
+    data = runs("reference")
+    cand = next(
+        c
+        for c in default_candidates(reference_model, scope="structure")
+        if c.location.name == "point 7 x" and c.law.kind == "cubic_spring"
+    )
+    fit = Screen(reference_model, data, locations=(cand.location,)).fit(cand)
+    assert fit.candidate is cand and all(np.isfinite(v) for v in fit.values.values())
