@@ -1,4 +1,4 @@
-"""Progress events of a run and the bus that delivers them to subscribers.
+"""Progress events of a run, delivered to subscribers by the one event bus.
 
 The engine publishes an event at every milestone: the run starting, the pretest result, each
 step starting, every force-control iteration, each step finishing (with its phasors and the
@@ -10,19 +10,20 @@ short (a GUI hands the event to its own thread, e.g. through a Qt signal). An ex
 callback is logged and does not stop the run; ``KeyboardInterrupt`` and other
 ``BaseException`` s pass through (a callback may end a run as Ctrl-C would). Subscribing and
 unsubscribing are thread-safe and may happen while a run is under way.
+
+The base :class:`Event`, :class:`EventBus` and :class:`Subscription` are the analysis's
+(:mod:`analysis.events`): a run's events and a calibration's or a diagnosis's progress share one
+protocol, a callable taking an :class:`Event`, so a front end subscribes to both the same way.
 """
 
 from __future__ import annotations
 
-import itertools
-import logging
-import threading
-import time
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from analysis.events import Event, EventBus, Subscription
 
 __all__ = [
     "ControlIteration",
@@ -40,15 +41,6 @@ __all__ = [
     "StepStarted",
     "Subscription",
 ]
-
-logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class Event:
-    """Base of every event; ``time_s`` is the POSIX time it was created."""
-
-    time_s: float = field(default_factory=time.time, kw_only=True)
 
 
 @dataclass(frozen=True)
@@ -197,58 +189,3 @@ class RunFinished(Event):
 
     status: str
     message: str
-
-
-@dataclass(frozen=True)
-class Subscription:
-    """Handle returned by :meth:`EventBus.subscribe`; :meth:`cancel` unsubscribes."""
-
-    bus: EventBus
-    key: int
-
-    def cancel(self) -> None:
-        self.bus.unsubscribe(self)
-
-
-class EventBus:
-    """Delivers events to subscribed callbacks (thread-safe).
-
-    Examples
-    --------
-    >>> bus = EventBus()
-    >>> sub = bus.subscribe(print, kinds=(StepFinished,))
-    >>> sub.cancel()
-    """
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._subs: dict[int, tuple[Callable[[Event], Any], tuple[type, ...] | None]] = {}
-        self._keys = itertools.count()
-
-    def subscribe(
-        self, callback: Callable[[Event], Any], kinds: tuple[type, ...] | None = None
-    ) -> Subscription:
-        """Call ``callback(event)`` for every event (or only those of the given classes)."""
-        if not callable(callback):
-            raise TypeError(f"subscribe: callback must be callable, got {callback!r}")
-        with self._lock:
-            key = next(self._keys)
-            self._subs[key] = (callback, tuple(kinds) if kinds else None)
-        return Subscription(self, key)
-
-    def unsubscribe(self, subscription: Subscription) -> None:
-        """Stop delivering to a subscription (no error if already gone)."""
-        with self._lock:
-            self._subs.pop(subscription.key, None)
-
-    def publish(self, event: Event) -> None:
-        """Deliver ``event`` to the subscribers at the time of the call."""
-        with self._lock:
-            subs = list(self._subs.values())
-        for callback, kinds in subs:
-            if kinds is not None and not isinstance(event, kinds):
-                continue
-            try:
-                callback(event)
-            except Exception:
-                logger.exception("event subscriber %r failed on %s", callback, type(event).__name__)
