@@ -39,6 +39,7 @@ __all__ = [
     "Subscription",
     "UnitDone",
     "iteration",
+    "iterations",
 ]
 
 logger = logging.getLogger(__name__)
@@ -87,7 +88,7 @@ class Iteration(Event):
     Attributes
     ----------
     stage : str
-        Which optimisation (``"lm"``, ``"joint"``, ``"verification"``, ``"recalibration"``).
+        Which optimisation (``"Levenberg-Marquardt"``, ``"joint refinement"``).
     iteration : int
         0 at the start point, then one per accepted step.
     cost : float
@@ -137,9 +138,13 @@ class StageDone(Event):
 
     def text(self) -> str:
         """One line for a person: the stage and the figures it has."""
+        parts = [] if self.count is None else [f"{self.count}"]
+        detail = self.detail()
+        return f"{self.stage}: {', '.join([*parts, detail] if detail else parts)}"
+
+    def detail(self) -> str:
+        """The figures other than ``count`` (``"residual 1.02 x noise, 12.3 s"``)."""
         parts = []
-        if self.count is not None:
-            parts.append(f"{self.count}")
         if self.rms_over_noise is not None:
             parts.append(f"residual {self.rms_over_noise:.4g} x noise")
         if self.cost is not None:
@@ -150,7 +155,7 @@ class StageDone(Event):
             parts.append(self.note)
         if self.seconds is not None:
             parts.append(f"{self.seconds:.1f} s")
-        return f"{self.stage}: {', '.join(parts)}" if parts else self.stage
+        return ", ".join(parts)
 
 
 def iteration(stage: str, entry: Mapping[str, Any], last: bool = False) -> Iteration:
@@ -163,6 +168,14 @@ def iteration(stage: str, entry: Mapping[str, Any], last: bool = False) -> Itera
         tuple(float(v) for v in entry.get("x", ())),
         last,
     )
+
+
+def iterations(stage: str, progress: Listener | None) -> Callable[[Mapping], None] | None:
+    """An optimiser's per-iteration callback that hands ``progress`` an :class:`Iteration`
+    (None without a listener, so the optimiser skips the call)."""
+    if progress is None:
+        return None
+    return lambda entry: progress(iteration(stage, entry))
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,9 @@ one of two ways:
 
 The time left is the pace so far times the work left (:func:`time_left`): the stages report
 units of about equal cost.
+
+A reporter's :meth:`ProgressReporter.event` is a listener of :mod:`analysis.events`: pass it as
+the ``progress`` of a calibration, a cross-validation or a diagnosis.
 """
 
 from __future__ import annotations
@@ -24,6 +27,8 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from typing import TextIO
+
+from analysis.events import Event, Iteration, StageDone, UnitDone
 
 __all__ = [
     "PREFIX",
@@ -180,6 +185,29 @@ class ProgressReporter:
         if total is not None and done < total:
             left = time_left(now - t0, done - done0, total - done)
         self.show(Progress(stage, done, total, now - t0, note, left))
+
+    def event(self, e: Event) -> None:
+        """Show an event of :mod:`analysis.events`: a counted unit as the stage's count, an
+        optimiser's iterations as a count of their own, a milestone as a line of its own."""
+        if isinstance(e, UnitDone):
+            note = e.label or ("" if e.cost is None else f"metric {e.cost:.4g}")
+            self.update(e.stage, e.done, e.total, note)
+        elif isinstance(e, Iteration):
+            total = e.iteration if e.last else None
+            self.update(f"{e.stage} iterations", e.iteration, total, f"metric {e.cost:.6g}")
+        elif isinstance(e, StageDone):
+            self.milestone(e)
+
+    def milestone(self, e: StageDone) -> None:
+        """Show a milestone at once (never held back by the interval)."""
+        if self.mode == "none":
+            return
+        if self.mode == "json":
+            n = e.count if e.count is not None else 0
+            p = Progress(e.stage, n, n, e.seconds or 0.0, e.detail())
+            self._write(PREFIX + json.dumps(asdict(p)))
+        else:
+            self._write(self.prefix + e.text())
 
     def show(self, p: Progress) -> None:
         """Show ``p`` if it is due (always at its start and end)."""

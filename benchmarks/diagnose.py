@@ -441,7 +441,7 @@ def calibrate_paper_way(stepped: Path, linear: Path, *, n_starts: int = 30, seed
     """Nominal model -> linear calibration on the random test -> k_c, gap, v_c from Latin
     hypercube starts and LM on every level but the highest (on the measured branch, the
     steps the rig converged at)."""
-    from analysis.diagnosis import refit
+    from analysis.diagnosis.refit import Starts, refit
 
     lin = calibrate_linear(load_model(), linear).model
     data = read_measurement(stepped)
@@ -452,9 +452,11 @@ def calibrate_paper_way(stepped: Path, linear: Path, *, n_starts: int = 30, seed
         data,
         ("k_c", "gap", "v_c"),
         rows=rows,
-        distributions=paper_distributions(lin.parameters["gap"].nominal),
-        n_random_starts=n_starts,
-        seed=seed,
+        starts=Starts(
+            distributions=paper_distributions(lin.parameters["gap"].nominal),
+            n_random=n_starts,
+            seed=seed,
+        ),
     )
     return fit.model, data
 

@@ -42,34 +42,9 @@ __all__ = ["add_parsers"]
 log = logging.getLogger(__name__)
 
 
-def _progress(reporter: ProgressReporter):
-    """``calibrate_nonlinear``'s progress callback, shown by ``reporter``."""
-
-    def show(stage: str, info: dict) -> None:
-        if stage == "lhs_progress" and info["done"] < info["total"]:
-            reporter.update("Latin hypercube starts", info["done"], info["total"])
-        elif stage == "lhs":  # the last start, with the best metric
-            reporter.update(
-                "Latin hypercube starts",
-                info["n"],
-                info["n"],
-                f"best metric {info['best_cost']:.4g}",
-            )
-        elif stage in ("lm", "joint", "lm_done", "joint_done"):
-            what = "LM iterations" if stage.startswith("lm") else "joint refinement iterations"
-            total = info["iteration"] if stage.endswith("_done") else None
-            reporter.update(what, info["iteration"], total, f"metric {info['cost']:.6g}")
-
-    return show
-
-
 def _reporter(args) -> ProgressReporter:
     """Progress as text for a person, as JSON lines with ``--json`` (for ``rig workflow``)."""
     return ProgressReporter("json" if args.json else "text", prefix="calibration: ")
-
-
-def _folds_progress(reporter: ProgressReporter):
-    return lambda done, total: reporter.update("cross-validation folds", done, total)
 
 
 def _stepped(path: str) -> SteppedSineData:
@@ -165,7 +140,7 @@ def _print_result(res, model) -> None:
 
 def _crossval_into(res, model, data, executor, out: Path, reporter: ProgressReporter):
     """Cross-validate ``res``, widen its intervals by the folds' evidence, write the files."""
-    cv = cross_validate(model, data, res, executor=executor, on_done=_folds_progress(reporter))
+    cv = cross_validate(model, data, res, executor=executor, progress=reporter.event)
     res.widen_with_folds(cv.std_ratio, [cv.folds[j] for j in cv.misfit_folds()])
     return cv, _write_crossval(cv, out)
 
@@ -192,9 +167,7 @@ def cmd_calibrate(args) -> dict:
     cv = None
     reporter = _reporter(args)
     with open_executor(args.workers, args.scheduler) as ex:
-        res = calibrate_nonlinear(
-            model, data, st, executor=ex, progress=_progress(reporter), held=held
-        )
+        res = calibrate_nonlinear(model, data, st, executor=ex, progress=reporter.event, held=held)
         if not args.no_crossval:
             t1 = time.perf_counter()
             cv, cv_fig = _crossval_into(res, model, data, ex, out, reporter)

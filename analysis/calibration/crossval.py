@@ -24,7 +24,6 @@ import dataclasses
 import functools
 import logging
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,13 +38,17 @@ from analysis.calibration.nonlinear import (
 )
 from analysis.calibration.objective import FRFObjective
 from analysis.calibration.uncertainty import adequate
+from analysis.events import Listener, UnitDone
 from analysis.executors import run_jobs
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 
-__all__ = ["CrossValidation", "cross_validate"]
+__all__ = ["FOLDS_STAGE", "CrossValidation", "cross_validate"]
 
 log = logging.getLogger(__name__)
+
+#: The stage name of the folds in the cross-validation's events.
+FOLDS_STAGE = "cross-validation folds"
 
 
 @dataclass
@@ -222,7 +225,7 @@ def cross_validate(
     *,
     executor: cf.Executor | None = None,
     max_iterations: int = 20,
-    on_done: Callable[[int, int], None] | None = None,
+    progress: Listener | None = None,
 ) -> CrossValidation:
     """K-fold cross-validation started from the calibrated optimum.
 
@@ -234,8 +237,9 @@ def cross_validate(
     calibration : NonlinearCalibration
     executor : concurrent.futures.Executor, optional
         Runs the folds in parallel.
-    on_done : callable, optional
-        ``on_done(done, total)`` as folds finish (progress).
+    progress : callable, optional
+        Receives a :class:`analysis.events.UnitDone` (stage :data:`FOLDS_STAGE`) as folds
+        finish, and one with ``done`` 0 when they start.
     """
     t0 = time.perf_counter()
     model = calibration.conditioned(model)
@@ -269,7 +273,7 @@ def cross_validate(
         )
     bounds = space.theta_bounds()
     x0 = calibration.lm.x
-    tick = (lambda k: on_done(k, len(specs))) if on_done else None
+    tick = (lambda k: progress(UnitDone(FOLDS_STAGE, k, len(specs)))) if progress else None
     if tick:
         tick(0)  # the clock starts here: folds run side by side
     full = dataclasses.replace(specs[0], mask=base).build()

@@ -28,12 +28,14 @@ from analysis.calibration.uncertainty import (
     noise_scale,
     propagate_held,
 )
+from analysis.events import Iteration, Listener, StageDone, UnitDone, iterations
 from analysis.measurement_file import SteppedSineData, read_measurement
 from analysis.model import Model
 from analysis.predict import SteppedSinePredictor
 from analysis.predict_branches import BranchMatchedPredictor
 
 __all__ = [
+    "LHS_STAGE",
     "CalibrationSettings",
     "NonlinearCalibration",
     "calibrate_nonlinear",
@@ -44,6 +46,9 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+#: The stage name of the Latin hypercube starts in the calibration's events.
+LHS_STAGE = "Latin hypercube starts"
 
 
 @dataclass(frozen=True)
@@ -645,6 +650,11 @@ def _lowest_level(data: SteppedSineData, rows: np.ndarray) -> np.ndarray:
     return out & np.isclose(lv, lv[rows].min())
 
 
+def _last(stage: str, res: LeastSquaresResult) -> Iteration:
+    """Where an optimisation stopped, as its last :class:`Iteration`."""
+    return Iteration(stage, res.nit, float(res.cost), tuple(map(float, res.x)), last=True)
+
+
 def _best_lm(objective, starts, bounds, st: CalibrationSettings, progress):
     """Levenberg-Marquardt from each of ``starts`` (the best Latin hypercube points); the
     result of least cost."""
@@ -655,12 +665,12 @@ def _best_lm(objective, starts, bounds, st: CalibrationSettings, progress):
             theta,
             bounds=bounds,
             max_iterations=st.max_iterations,
-            callback=(lambda h: progress("lm", h)) if progress else None,
+            callback=iterations("Levenberg-Marquardt", progress),
         )
         if best is None or res.cost < best.cost:
             best = res
     if progress:
-        progress("lm_done", {"iteration": best.nit, "cost": float(best.cost)})
+        progress(_last("Levenberg-Marquardt", best))
     return best
 
 
@@ -670,7 +680,7 @@ def calibrate_nonlinear(
     settings: CalibrationSettings | None = None,
     *,
     executor: cf.Executor | None = None,
-    progress: Callable[[str, dict], None] | None = None,
+    progress: Listener | None = None,
     held: HeldParameters | None = None,
 ) -> NonlinearCalibration:
     """Calibrate nonlinear parameters on multi-harmonic FRFs (paper sec. 2.3).
@@ -685,7 +695,10 @@ def calibrate_nonlinear(
     executor : concurrent.futures.Executor, optional
         Runs the Latin hypercube evaluations (a process pool, or a Dask client's executor).
     progress : callable, optional
-        ``progress(stage, info)`` for command lines and GUIs.
+        Receives the calibration's :mod:`analysis.events`: a :class:`UnitDone` per Latin
+        hypercube start (stage ``"Latin hypercube starts"``), a :class:`StageDone` when they
+        are scored, an :class:`Iteration` per Levenberg-Marquardt iteration (stage ``"lm"``,
+        then ``"joint"`` for the joint refinement; ``last`` where each stopped).
     held : HeldParameters, optional
         The uncertainty of the values the calibration holds (the linear parameters, the
         modal damping): carried into the reported covariance. None: they are held as exact.
@@ -717,7 +730,7 @@ def calibrate_nonlinear(
     starts = latin_hypercube(dists, st.n_starts, st.seed, space.names)
     lo_t, hi_t = space.theta_bounds()
     thetas = np.clip(space.to_theta(starts), lo_t, hi_t)
-    tick = (lambda k, n: progress("lhs_progress", {"done": k, "total": n})) if progress else None
+    tick = (lambda k, n: progress(UnitDone(LHS_STAGE, k, n))) if progress else None
     costs, exact = screen_costs(
         spec, thetas, st.n_lm_starts, executor, objective, tick, first=_lowest_level(data, rows)
     )
@@ -726,7 +739,7 @@ def calibrate_nonlinear(
         raise RuntimeError("no Latin hypercube start gave a converged model response")
     order = np.argsort(costs)
     if progress:
-        progress("lhs", {"n": len(costs), "best_cost": float(costs[order[0]]), "seconds": lhs_s})
+        progress(StageDone(LHS_STAGE, count=len(costs), cost=float(costs[order[0]]), seconds=lhs_s))
     t0 = time.perf_counter()
     best = _best_lm(objective, thetas[order[: st.n_lm_starts]], (lo_t, hi_t), st, progress)
     lm_s = time.perf_counter() - t0
@@ -821,10 +834,10 @@ def _joint_refinement(result, model, data, objective, progress) -> None:
         x0,
         bounds=(lo, hi),
         max_iterations=st.max_iterations,
-        callback=(lambda h: progress("joint", h)) if progress else None,
+        callback=iterations("joint refinement", progress),
     )
     if progress:
-        progress("joint_done", {"iteration": res.nit, "cost": float(res.cost)})
+        progress(_last("joint refinement", res))
     nb = len(held.names)
     J = res.jac[:-nb]
     D = sp.dp_dtheta(res.x)

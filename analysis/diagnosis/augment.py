@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,9 +38,10 @@ from analysis.calibration.lhs import Distribution
 from analysis.calibration.nonlinear import fitted_rows
 from analysis.diagnosis.candidates import Candidate
 from analysis.diagnosis.compare import Comparison, compare
-from analysis.diagnosis.refit import refit
+from analysis.diagnosis.refit import FitLimits, Starts, refit
 from analysis.diagnosis.screen import Screen
 from analysis.diagnosis.verify import damping_parameters, start_distributions
+from analysis.events import Listener, StageDone
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 from analysis.predict_branches import BranchMatchedPredictor
@@ -200,7 +201,7 @@ def augment(
     reweight_passes: int = 1,
     seed: int = 0,
     out: str | Path | None = None,
-    progress: Callable[[str, dict], None] | None = None,
+    progress: Listener | None = None,
     n_harmonics: int = 9,
     n_time: int = 128,
     check_balance: bool = True,
@@ -234,6 +235,9 @@ def augment(
     out : path, optional
         Write the augmented model there (a new file).
     progress : callable, optional
+        Receives :mod:`analysis.events`: the recalibration's starts and iterations
+        (:func:`~analysis.diagnosis.refit.refit`) and a :class:`~analysis.events.StageDone`
+        for the screen's estimate, the linear recalibration and the balance's check.
     n_harmonics, n_time : int
         Balance settings.
     check_balance : bool
@@ -245,7 +249,7 @@ def augment(
     AugmentResult
     """
     t0 = time.perf_counter()
-    say = progress or (lambda stage, info: None)
+    say: Listener = progress or _ignore
     before = compare(model, data, predictor=_predictor(model, data, n_harmonics, n_time))
     if values is None:
         screen = Screen(
@@ -256,7 +260,7 @@ def augment(
         )
         fit = screen.fit(candidate)
         values, known = dict(fit.values), dict(fit.known) if known is None else known
-        say("screen", {"values": values, "known": known})
+        say(StageDone("screened", values=values))
     m2, new = _with_candidate(model, candidate, values, known)
     base_rows = fitted_rows(data, _calibration_levels(data, validation_level_n))
     z = np.abs(before.residual[base_rows]) ** 2
@@ -276,25 +280,25 @@ def augment(
     levels = _calibration_levels(data, validation_level_n)
     rows = fitted_rows(data, levels)
 
-    def report(stage, info):
-        if stage == "lm":
-            say("lm", info)
-
+    plain = [n for n in names if not n.startswith("zeta_")]
+    starts = Starts(
+        distributions=start_distributions(m2, plain, {})
+        | {n: Distribution("loguniform", 0.002, 0.05) for n in names if n.startswith("zeta_")},
+        n_random=n_starts,
+        n_lm=2 if n_starts else 1,
+        seed=seed,
+    )
+    limits = FitLimits(max_iterations=max_iterations, reweight_passes=reweight_passes)
     r = refit(
         m2,
         data,
         names,
         rows=rows,
-        distributions=start_distributions(m2, [n for n in names if not n.startswith("zeta_")], {})
-        | {n: Distribution("loguniform", 0.002, 0.05) for n in names if n.startswith("zeta_")},
-        n_random_starts=n_starts,
-        n_lm_starts=2 if n_starts else 1,
-        seed=seed,
-        max_iterations=max_iterations,
-        progress=report,
+        starts=starts,
+        limits=limits,
+        progress=say,
         n_harmonics=n_harmonics,
         n_time=n_time,
-        reweight_passes=reweight_passes,
     )
     history += [{"stage": "reweighted" if h.get("pass") else "lm", **h} for h in r.history]
     after = compare(r.model, data, predictor=_predictor(r.model, data, n_harmonics, n_time))
@@ -309,18 +313,23 @@ def augment(
         fine = compare(r.model, data, predictor=_predictor(r.model, data, nh, nt))
         t = truncation_over_noise(after, fine)
         balance.update(truncation_over_noise=t, checked_harmonics=n_harmonics)
-        say("balance", {"n_harmonics": n_harmonics, "truncation_over_noise": t})
+        say(
+            StageDone(
+                "balance checked",
+                rms_over_noise=t,
+                note=f"truncation at {n_harmonics} harmonics",
+            )
+        )
         if t >= TRUNCATION_SHARE:
             r = refit(
                 r.model,
                 data,
                 names,
                 rows=rows,
-                max_iterations=max_iterations,
-                progress=report,
+                limits=limits,
+                progress=say,
                 n_harmonics=nh,
                 n_time=nt,
-                reweight_passes=reweight_passes,
             )
             history += [{**h, "stage": "finer balance"} for h in r.history]
             before = compare(model, data, predictor=_predictor(model, data, nh, nt))
@@ -364,7 +373,13 @@ def _with_candidate(model: Model, candidate: Candidate, values, known):
     return m2.with_values(start), new
 
 
-def _linear_first(m2: Model, new: list, candidate: Candidate, linear_run, history: list, say):
+def _ignore(event) -> None:
+    """The listener when none is given."""
+
+
+def _linear_first(
+    m2: Model, new: list, candidate: Candidate, linear_run, history: list, say: Listener
+):
     """A linear effect recalibrated on the linear test first (its linear parameters then stay
     out of the stepped sine's fit), or, without the test, fitted there with the linear ones.
     Returns the model, the names to fit and the linear calibration's summary."""
@@ -386,7 +401,7 @@ def _linear_first(m2: Model, new: list, candidate: Candidate, linear_run, histor
                 "parameters": res.parameters,
             }
         )
-        say("linear", {"cost": res.cost, "parameters": res.parameters})
+        say(StageDone("linear recalibration", cost=res.cost, values=res.parameters))
         new = [n for n in new if m2.parameters[n].group != "linear"]
     elif candidate.is_linear:
         new = list(dict.fromkeys([*new, *linear_params]))

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 from analysis.diagnosis.augment import augment
@@ -23,51 +22,21 @@ from analysis.diagnosis.compare import compare, uncalibrated_note
 from analysis.diagnosis.diagnose import diagnose
 from analysis.diagnosis.result import DiagnosisSettings
 from analysis.diagnosis.separate import write_separating_plan
+from analysis.events import StageDone
 from analysis.logs import add_debug_option, configure_logging, note_inputs, summarise_repeats
 from analysis.measurement_file import SteppedSineData, read_measurement, require_steps
 from analysis.model import load_model
 from analysis.predict_branches import BranchMatchedPredictor
+from analysis.progress import ProgressReporter
 
 __all__ = ["add_parsers"]
 
 
-def _value(v) -> str:
-    """A progress value as text: numbers short, a mapping as ``name=value`` pairs."""
-    if isinstance(v, float):
-        return f"{v:.4g}"
-    if isinstance(v, dict):
-        return "{" + ", ".join(f"{k}={_value(x)}" for k, x in v.items()) + "}"
-    return str(v)
-
-
-def _progress(quiet: bool):
-    """The progress printer of the diagnosis commands: ``show(stage, info)`` to stderr.
-
-    Every event kind the diagnosis, the screen, the refit and the augmentation emit is printed:
-    the per-candidate ``"screen"``/``"refine"`` and per-start ``"start"`` counters (every 25th
-    and the last), ``"lm"`` iterations, and any other event (including a ``"screen"`` event
-    without a counter, as the augmentation sends with the screen's values) as its fields.
-    """
-    t0 = time.perf_counter()
-
-    def show(stage: str, info: dict) -> None:
-        if quiet:
-            return
-        t = time.perf_counter() - t0
-        if stage in ("screen", "refine", "start") and "index" in info and "n" in info:
-            if info["index"] + 1 == info["n"] or info["index"] % 25 == 0:
-                print(f"[{t:6.1f} s] {stage} {info['index'] + 1}/{info['n']}", file=sys.stderr)
-            return
-        if stage == "lm" and "iteration" in info and "cost" in info:
-            print(
-                f"[{t:6.1f} s] LM iteration {info['iteration']}: metric {info['cost']:.6g}",
-                file=sys.stderr,
-            )
-            return
-        text = ", ".join(f"{k} {_value(v)}" for k, v in info.items() if not isinstance(v, list))
-        print(f"[{t:6.1f} s] {stage}: {text}", file=sys.stderr)
-
-    return show
+def _progress(quiet: bool) -> ProgressReporter:
+    """Progress of the diagnosis commands on stderr (none with ``--json``): counted stages
+    (the screen, the starts) as a count, Levenberg-Marquardt's iterations, each milestone on
+    a line of its own."""
+    return ProgressReporter("none" if quiet else "text", prefix="diagnosis: ")
 
 
 def read_stepped(path: str) -> SteppedSineData:
@@ -138,7 +107,7 @@ def cmd_diagnose(args) -> dict:
             data,
             linear_run=args.linear_run,
             settings=_settings(args),
-            progress=_progress(args.json),
+            progress=_progress(args.json).event,
         )
     if args.figures:
         from analysis.report.diagnosis_figures import plot_diagnosis
@@ -168,7 +137,7 @@ def cmd_augment(args) -> dict:
     """Add the chosen effect (or the best of a diagnosis), recalibrate, compare."""
     model, data = _model(args), read_stepped(args.run)
     _note_uncalibrated(model)
-    show = _progress(args.json)
+    show = _progress(args.json).event
     values = known = None
     if args.candidate:
         matches = [
@@ -193,7 +162,7 @@ def cmd_augment(args) -> dict:
         best = diag.group[0]
         cand = best.candidate
         values, known = best.start_values()
-        show("chosen", {"candidate": cand.label})
+        show(StageDone("chosen", note=cand.label))
     with summarise_repeats("augment"):
         result = augment(
             model,

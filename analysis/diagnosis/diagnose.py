@@ -22,19 +22,19 @@
    best picks at unmeasured locations (a group of springs, a joint); each recalibrated by
    Levenberg-Marquardt from the screen's (or the linear test's) values, at most ``workers``
    at a time. The picks at unmeasured locations are dropped once a verified candidate
-   is at the noise or the stage has used ``time_budget_s`` of processor time. A fit that
-   went most of the way but not to the explained level goes on with its weights recomputed
-   as soon as it finishes (beside the stage's last verifications); if none explains it, so
-   do, while processor time is left, those stopped for time while still falling fast.
+   is at the noise or the stage's verifications have made ``budget_evaluations``
+   evaluations of the objective. A fit that went most of the way but not to the explained
+   level goes on with its weights recomputed as soon as it finishes (beside the stage's last
+   verifications); if none explains it, so do, while allowance is left, those stopped at
+   their allowance while still falling fast.
    Then, if the best sits at a measured point and explains the misfit or went most of the
    way, its law at the screen's next measured points, started from its fit (a neighbour can
    explain a strong effect nearly to the noise), or, at an unmeasured location and not at
    the noise, the simplest of the next laws there. If
-   none explains it, then, while time is left, the next laws, the best of each law family
-   the evidence points at, and further starts for the best two. Every limit is processor
-   time, so other processes on the machine do not cut a diagnosis short (the processor time
-   an iteration takes still varies from run to run, so a fit near its limit can end an
-   iteration earlier or later).
+   none explains it, then, while allowance is left, the next laws, the best of each law
+   family the evidence points at, and further starts for the best two. Every limit counts
+   work (iterations, evaluations of the objective), never time: the same data and settings
+   give the same diagnosis on any machine, however busy.
 5. **Rank** the verified candidates by BIC on the same steps against the recalibrated model;
    candidates within ``tie_bic`` of the best form a tied group, ordered by BIC. The effect
    is *explained* when the best brings the residual to ``explained_rms`` of the noise;
@@ -49,7 +49,6 @@ import dataclasses
 import logging
 import math
 import time
-from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, wait
 from pathlib import Path
 
@@ -69,6 +68,7 @@ from analysis.diagnosis.screen import (
 )
 from analysis.diagnosis.signatures import FAMILIES, Evidence, find_signatures
 from analysis.diagnosis.verify import Verified, VerifyJob, run_verify
+from analysis.events import Listener, StageDone
 from analysis.executors import Deferred, open_executor
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
@@ -152,6 +152,10 @@ def _screen_from(model: Model, data, st: DiagnosisSettings, pred=None) -> Screen
 def _lead(fits: list[ScreenFit]) -> ScreenFit | None:
     """The screen's best nonlinear candidate: the first :func:`_shortlist` picks."""
     return next((f for f in fits if f.candidate.law.kind not in _LINEAR_KINDS), None)
+
+
+def _ignore(event) -> None:
+    """The listener when none is given."""
 
 
 def _best_rms(done: list[Verified]) -> float:
@@ -378,14 +382,16 @@ class _Jobs:
             start_toml,
             st.n_harmonics,
             st.n_time,
-            st.verify_seconds,
+            st.verify_evaluations,
             reweight_drop=st.reweight_drop,
         )
 
     def go_on(self, cand: Candidate | None, v: Verified) -> VerifyJob:
         """A verification continued from where ``v`` stopped."""
         job = self.verify(cand, start_toml=v.model_toml)
-        return dataclasses.replace(job, max_seconds=self.st.continue_seconds, reweight_passes=1)
+        return dataclasses.replace(
+            job, max_evaluations=self.st.continue_evaluations, reweight_passes=1
+        )
 
 
 @dataclasses.dataclass
@@ -434,7 +440,7 @@ def diagnose(
     linear_run: str | Path | None = None,
     candidates: list[Candidate] | None = None,
     settings: DiagnosisSettings | None = None,
-    progress: Callable[[str, dict], None] | None = None,
+    progress: Listener | None = None,
 ) -> Diagnosis:
     """Find which physical effect the model misses.
 
@@ -451,7 +457,11 @@ def diagnose(
         Default: :func:`~analysis.diagnosis.candidates.default_candidates`.
     settings : DiagnosisSettings, optional
     progress : callable, optional
-        ``progress(stage, info)`` for command lines.
+        Receives the diagnosis's :mod:`analysis.events`: a :class:`UnitDone` per candidate
+        screened (stage ``"screen"``, then ``"refine"``) and per start scored, an
+        :class:`Iteration` per Levenberg-Marquardt iteration of a fit run in this process, and
+        a :class:`StageDone` at each milestone (``"compared"``, ``"screened"``,
+        ``"verified"``, ...).
 
     Returns
     -------
@@ -460,13 +470,13 @@ def diagnose(
     st = settings or DiagnosisSettings()
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    say = progress or (lambda stage, info: None)
+    say: Listener = progress or _ignore
     pred = BranchMatchedPredictor(model, data, n_harmonics=st.n_harmonics, n_time=st.n_time)
     cmp = compare(model, data, predictor=pred)
     _, s = pred.measured()
     evidence = find_signatures(cmp, data, s, _linear_steps(pred))
     timings["compare_s"] = time.perf_counter() - t0
-    say("compare", {"rms_over_noise": cmp.rms_over_noise, "seconds": timings["compare_s"]})
+    say(StageDone("compared", rms_over_noise=cmp.rms_over_noise, seconds=timings["compare_s"]))
     if cmp.rms_over_noise <= st.adequate_rms:
         timings["total_s"] = time.perf_counter() - t0
         return Diagnosis("adequate", cmp, evidence, timings=timings, settings=st)
@@ -481,10 +491,10 @@ def diagnose(
         st,
     )
     with open_executor(st.workers) as ex:
-        sc = _screen_step(model, data, cands, pred, cmp, evidence, jobs, ex, say, progress, timings)
+        sc = _screen_step(model, data, cands, pred, cmp, evidence, jobs, ex, say, timings)
         refit = sc.refit
         timings["refit_s"] = refit.seconds
-        say("recalibrated", {"rms_over_noise": refit.rms_over_noise()})
+        say(StageDone("recalibrated", rms_over_noise=refit.rms_over_noise()))
         result = Diagnosis(
             "adequate",
             cmp,
@@ -500,7 +510,7 @@ def diagnose(
             timings["total_s"] = time.perf_counter() - t0
             return result
         if Policy(st, FitSummary.of(refit)).rescreen(cmp.rms_over_noise):
-            _screen_again(sc, result, data, evidence, jobs, ex, say, progress)
+            _screen_again(sc, result, data, evidence, jobs, ex, say)
         t2 = time.perf_counter()
         run, further = _first_verifications(sc, jobs, ex, say)
         _continue_falling(run, further, jobs, ex, say)
@@ -522,8 +532,7 @@ def _screen_step(
     evidence: Evidence,
     jobs: _Jobs,
     ex,
-    say,
-    progress,
+    say: Listener,
     timings,
 ) -> _Screened:
     """The screen, with the recalibration and the linear test's candidates on the workers
@@ -555,10 +564,10 @@ def _screen_step(
         ]
     screen = _screen_from(model, data, st, pred)
     baseline = screen.baseline()
-    fits = screen.first_pass(mine, progress) + (share.result() if theirs else [])
-    fits = screen.refine(fits, st.n_refine, progress)
+    fits = screen.first_pass(mine, say) + (share.result() if theirs else [])
+    fits = screen.refine(fits, st.n_refine, say)
     timings["screen_s"] = time.perf_counter() - t1
-    say("screened", {"n": len(fits), "seconds": timings["screen_s"]})
+    say(StageDone("screened", count=len(fits), seconds=timings["screen_s"]))
     refit = refit_job.result()
     # the screen's best law goes first in any case: its verification starts as soon as a
     # worker is free, while this process makes the short list (its refinements at
@@ -588,7 +597,9 @@ def _screen_step(
     )
 
 
-def _linear_results(lin_jobs: list[Deferred], say) -> tuple[LinearFit | None, list[LinearFit]]:
+def _linear_results(
+    lin_jobs: list[Deferred], say: Listener
+) -> tuple[LinearFit | None, list[LinearFit]]:
     """The linear test's recalibrated model and its candidates, best first."""
     if not lin_jobs:
         return None, []
@@ -597,15 +608,13 @@ def _linear_results(lin_jobs: list[Deferred], say) -> tuple[LinearFit | None, li
     for f in lin_fits:
         f.delta_bic = f.bic - lin_base.bic
     lin_fits.sort(key=lambda f: f.bic)
-    say(
-        "linear screen",
-        {"n": len(lin_fits), "best": lin_fits[0].candidate.label if lin_fits else ""},
-    )
+    best = lin_fits[0].candidate.label if lin_fits else ""
+    say(StageDone("linear screen", count=len(lin_fits), note=f"best {best}" if best else ""))
     return lin_base, lin_fits
 
 
 def _screen_again(
-    sc: _Screened, result: Diagnosis, data, evidence: Evidence, jobs: _Jobs, ex, say, progress
+    sc: _Screened, result: Diagnosis, data, evidence: Evidence, jobs: _Jobs, ex, say: Listener
 ) -> None:
     """The calibration's values were a poor start (a missing effect can pull the model's own
     parameters into a far minimum), and a screen reads the states through the model's own
@@ -613,17 +622,19 @@ def _screen_again(
     from (``jobs.text``)."""
     st = jobs.st
     t3 = time.perf_counter()
-    say("rescreen", {"rms_over_noise": sc.refit.rms_over_noise()})
+    say(StageDone("screen again", rms_over_noise=sc.refit.rms_over_noise()))
     jobs.text = sc.refit.model_toml
     sc.screen = _screen_from(Model.from_toml_text(jobs.text, jobs.source), data, st)
     sc.baseline = sc.screen.baseline()
-    sc.fits = sc.screen.run(sc.nonlinear, st.n_refine, progress, ex)
+    sc.fits = sc.screen.run(sc.nonlinear, st.n_refine, say, ex)
     sc.first, sc.second = _shortlist(sc.screen, sc.fits, evidence, st.n_verify, sc.baseline.bic)
     result.screen, result.baseline, result.rescreened = sc.fits, sc.baseline, True
     result.timings["rescreen_s"] = time.perf_counter() - t3
 
 
-def _first_verifications(sc: _Screened, jobs: _Jobs, ex, say) -> tuple[_Verifying, list[int]]:
+def _first_verifications(
+    sc: _Screened, jobs: _Jobs, ex, say: Listener
+) -> tuple[_Verifying, list[int]]:
     """The short list's first stage verified; returns the verifications and the indices of
     those that went on at once."""
     st, refit = jobs.st, sc.refit
@@ -657,7 +668,7 @@ def _first_verifications(sc: _Screened, jobs: _Jobs, ex, say) -> tuple[_Verifyin
         if len(gone_on) >= 2 or not policy.goes_on_at_once(FitSummary.of(v)):
             return None
         gone_on.append(i)
-        say("continue", {"n": 1, "rms_over_noise": v.rms_over_noise()})
+        say(StageDone("continued", count=1, rms_over_noise=v.rms_over_noise()))
         return jobs.go_on(vjobs[i].candidate, v)
 
     # the jobs run are the first len(ran), in order: their indices are their positions
@@ -666,16 +677,16 @@ def _first_verifications(sc: _Screened, jobs: _Jobs, ex, say) -> tuple[_Verifyin
     done = list(ran.values())
     for i, v in further.items():
         _merge(done, i, v)
-    say("verified", {"n": len(done), "best_rms": _best_rms(done)})
+    say(StageDone("verified", count=len(done), rms_over_noise=_best_rms(done)))
     return _Verifying(origin[: len(ran)], done, refit, policy), list(further)
 
 
-def _continue_falling(run: _Verifying, further: list[int], jobs: _Jobs, ex, say) -> None:
+def _continue_falling(run: _Verifying, further: list[int], jobs: _Jobs, ex, say: Listener) -> None:
     """The fits still falling fast go on (:meth:`Policy.to_continue`; those that went most of
     the way went on as soon as they finished)."""
     going = run.policy.to_continue(run.summaries(), further)
     if going:
-        say("continue", {"n": len(going)})
+        say(StageDone("continued", count=len(going)))
     cont = [
         Deferred(ex, run_verify, jobs.go_on(run.origin[i].candidate, run.done[i])) for i in going
     ]
@@ -683,7 +694,7 @@ def _continue_falling(run: _Verifying, further: list[int], jobs: _Jobs, ex, say)
         _merge(run.done, i, p.result())
 
 
-def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say) -> None:
+def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say: Listener) -> None:
     """From the best, where :meth:`Policy.walk_to` sends it: its law at the next measured
     points by the screen, from the best's fit, or the next laws at its unmeasured location
     (docs/diagnosis.md, the rules table)."""
@@ -699,11 +710,11 @@ def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say) -> Non
     tried = [o.candidate for o in origin]
     if walk_to == "points":
         walk = _walk_jobs(done[ranked[0]], sc.fits, tried, run.st.n_walk)
-        say("neighbours", {"n": len(walk)})
+        say(StageDone("neighbours", count=len(walk)))
     else:
         laws = _other_laws(sc.screen, sc.fits, lead.candidate, tried, run.st.n_walk)
         walk = [(f, f.values, f.known) for f in laws]
-        say("other laws", {"n": len(walk)})
+        say(StageDone("other laws", count=len(walk)))
     more = [
         Deferred(
             ex,
@@ -716,7 +727,7 @@ def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say) -> Non
     run.origin += [f for f, _, _ in walk]
 
 
-def _second_picks(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say) -> None:
+def _second_picks(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say: Listener) -> None:
     """If none explains it, while time is left, the short list's second stage."""
     if not run.policy.second_stage(run.summaries(), len(sc.second)):
         return
@@ -725,10 +736,10 @@ def _second_picks(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say) -> None:
     ]
     run.done += [p.result() for p in more]
     run.origin += sc.second
-    say("verified", {"n": len(run.done), "best_rms": _best_rms(run.done)})
+    say(StageDone("verified", count=len(run.done), rms_over_noise=_best_rms(run.done)))
 
 
-def _restart_best(run: _Verifying, jobs: _Jobs, ex, say) -> None:
+def _restart_best(run: _Verifying, jobs: _Jobs, ex, say: Listener) -> None:
     """Further starts for the best two, only if the best went most of the way (a local
     minimum of a strong effect), not for one that explains little; a restart is kept where it
     fits better."""
@@ -736,7 +747,7 @@ def _restart_best(run: _Verifying, jobs: _Jobs, ex, say) -> None:
     again = run.policy.restarts(run.summaries())
     if not again:
         return
-    say("restart", {"n": len(again)})
+    say(StageDone("restarts", count=len(again)))
     retry = []
     for i in again:
         o = run.origin[i]

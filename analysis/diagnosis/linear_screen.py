@@ -17,10 +17,11 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from analysis.diagnosis.candidates import Candidate
+from analysis.events import Listener, StageDone
 from analysis.measurement_file import read_measurement
 from analysis.model import Model
 
@@ -146,7 +147,7 @@ def linear_screen(
     candidates: Sequence[Candidate],
     *,
     executor=None,
-    progress: Callable[[str, dict], None] | None = None,
+    progress: Listener | None = None,
 ) -> tuple[LinearFit, list[LinearFit]]:
     """Recalibrate the model alone and with each linear candidate on the linear test.
 
@@ -183,5 +184,5 @@ def linear_screen(
         f.delta_bic = f.bic - base.bic
     fits.sort(key=lambda f: f.bic)
     if progress:
-        progress("linear screen", {"n": len(fits), "base_cost": base.cost})
+        progress(StageDone("linear screen", count=len(fits), cost=base.cost))
     return base, fits

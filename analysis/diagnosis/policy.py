@@ -33,7 +33,7 @@ class _Fit(Protocol):
     @property
     def stopped(self) -> bool: ...
 
-    cpu_seconds: float
+    evaluations: int
 
     def chi2_per_dof(self) -> float: ...
 
@@ -56,7 +56,8 @@ class FitSummary:
     last_decrease : float
         Share by which its last iteration lowered the metric.
     spent : float
-        What the fit used of the stage's allowance (``DiagnosisSettings.time_budget_s``).
+        What the fit used of the stage's allowance: its evaluations of the objective
+        (``DiagnosisSettings.budget_evaluations``).
     """
 
     chi2_per_dof: float
@@ -71,7 +72,7 @@ class FitSummary:
 
     @classmethod
     def of(cls, v: _Fit) -> FitSummary:
-        return cls(v.chi2_per_dof(), v.failed, v.stopped, v.last_decrease(), v.cpu_seconds)
+        return cls(v.chi2_per_dof(), v.failed, v.stopped, v.last_decrease(), v.evaluations)
 
 
 @dataclass(frozen=True)
@@ -109,7 +110,7 @@ class Policy:
 
     def left(self, done: Sequence[FitSummary]) -> float:
         """What is left of the stage's allowance after ``done``."""
-        return self.st.time_budget_s - sum(f.spent for f in done)
+        return self.st.budget_evaluations - sum(f.spent for f in done)
 
     def enough(self, done: Sequence[FitSummary]) -> bool:
         """The optional picks stop: one fit is at the noise, or the stage's allowance is spent."""
@@ -138,7 +139,7 @@ class Policy:
         (``continue_decrease``) only while the stage's allowance lasts."""
         if not self.unexplained(done):
             return []
-        time_left = self.left(done) > 0
+        allowance = self.left(done) > 0
         going = [
             i
             for i, f in enumerate(done)
@@ -146,7 +147,7 @@ class Policy:
             and not f.failed
             and (
                 self.promising(f)
-                or (f.stopped and f.last_decrease >= self.st.continue_decrease and time_left)
+                or (f.stopped and f.last_decrease >= self.st.continue_decrease and allowance)
             )
         ]
         going.sort(key=lambda i: done[i].chi2_per_dof)

@@ -22,11 +22,12 @@ from analysis.calibration.lhs import Distribution, latin_hypercube
 from analysis.calibration.lm import LeastSquaresResult, least_squares_lm
 from analysis.calibration.modal_damping import ZETA, DampedPredictor, damped_space
 from analysis.calibration.objective import FRFObjective
+from analysis.events import Listener, UnitDone, iterations
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 from analysis.predict_branches import BranchMatchedPredictor
 
-__all__ = ["Refit", "refit"]
+__all__ = ["FitLimits", "Refit", "Starts", "refit"]
 
 log = logging.getLogger(__name__)
 
@@ -71,6 +72,77 @@ class Refit:
     evaluations: int = 0
 
 
+@dataclass(frozen=True)
+class Starts:
+    """Where a :func:`refit` starts: always the model's own values, then ``given`` values, then
+    ``n_random`` Latin hypercube points from ``distributions`` (the paper's method); the
+    ``n_lm`` best of them by the metric are refined by Levenberg-Marquardt.
+
+    Attributes
+    ----------
+    given : sequence of mapping
+        Further start values (missing names keep the model's value).
+    distributions : mapping name -> Distribution, optional
+        Where the Latin hypercube draws each parameter.
+    n_random : int
+    n_lm : int
+    seed : int
+        The Latin hypercube's seed.
+    """
+
+    given: Sequence[Mapping[str, float]] = ()
+    distributions: Mapping[str, Distribution] | None = None
+    n_random: int = 0
+    n_lm: int = 1
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class FitLimits:
+    """When a :func:`refit`'s Levenberg-Marquardt stops besides its own criteria.
+
+    Every limit counts work (iterations, evaluations of the objective), never time, so the
+    same fit gives the same answer however busy the machine is.
+
+    Attributes
+    ----------
+    max_iterations : int
+    ftol : float
+        Stop when an iteration lowers the metric by less than this fraction.
+    max_evaluations : int or None
+        Evaluations of the objective (the balance on every fitted step, with or without its
+        Jacobian) allowed to Levenberg-Marquardt over all its starts: it stops before the
+        first evaluation past them and returns the last accepted iterate.
+    give_up_chi2 : float or None
+        Stop (keeping the last iterate) when the last iteration lowered the chi-square per
+        degree of freedom by less than half and it is still above this two or more iterations
+        in, or above twice this after the first: a candidate that does no better than the
+        model without it.
+    reweight_passes : int
+        Further Levenberg-Marquardt fits, each from the last one's values with the weights
+        (the force's error through the model) recomputed there. The first fit weighs the
+        steps by the start model's tangents, which can be far from the fitted model's near
+        a jump. Of all passes, the fit whose own weights give it the lowest metric is kept;
+        its ``history`` runs through the passes up to it (``"pass"`` numbers them, and each
+        pass starts with the metric at the same values under the new weights). Each pass has
+        ``max_evaluations`` of its own.
+    reweight_drop : float or None
+        Recompute the weights when an iteration stalls (lowers the metric by less than
+        :data:`STALL`) at a metric ``reweight_drop`` times or more below the one they were
+        computed at (the model has moved far from the start whose tangents they hold), and go
+        on from there with the iterations and evaluations left; again at each such stall
+        (Levenberg-Marquardt on stale weights stalls far above the noise: docs/diagnosis.md,
+        the rules table).
+    """
+
+    max_iterations: int = 30
+    ftol: float = 1e-6
+    max_evaluations: int | None = None
+    give_up_chi2: float | None = None
+    reweight_passes: int = 0
+    reweight_drop: float | None = None
+
+
 def _objective(model, data, names, rows, n_harmonics, n_time) -> FRFObjective:
     cls = DampedPredictor if any(n.startswith(ZETA) for n in names) else BranchMatchedPredictor
     pred = cls(model, data, n_harmonics=n_harmonics, n_time=n_time)
@@ -93,12 +165,15 @@ def _reweight(obj: FRFObjective, sigma: np.ndarray) -> None:
 
 
 #: Why a fit stopped before Levenberg-Marquardt's own criteria (its result's ``message``).
-OUT_OF_TIME = "stopped: the time allowed is up"
+OUT_OF_WORK = "stopped: the evaluations allowed are used"
 NO_BETTER = "stopped: no better than the bar it was given"
 REWEIGH = "reweighted"
 
 #: An iteration that lowers the metric by less than this share has stalled.
 STALL = 0.05
+
+#: The stage name of the refit's Levenberg-Marquardt iterations in its events.
+LM_STAGE = "Levenberg-Marquardt"
 
 
 @dataclass(frozen=True)
@@ -107,8 +182,8 @@ class StopRule:
 
     Parameters
     ----------
-    deadline : float, optional
-        This process's processor time (``time.process_time()``) past which the fit stops.
+    max_evaluations : int, optional
+        Evaluations of the objective after which the fit stops (:class:`FitLimits`).
     give_up_chi2 : float, optional
         The chi-square per degree of freedom a fit that is no longer falling fast must get
         below (``refit``'s ``give_up_chi2``).
@@ -117,22 +192,23 @@ class StopRule:
         metric (``refit``'s ``reweight_drop``).
     """
 
-    deadline: float | None = None
+    max_evaluations: int | None = None
     give_up_chi2: float | None = None
     reweigh_drop: float | None = None
 
-    def out_of_time(self) -> bool:
-        return self.deadline is not None and time.process_time() > self.deadline
+    def out_of_work(self, evaluations: int) -> bool:
+        return self.max_evaluations is not None and evaluations >= self.max_evaluations
 
-    def check(self, seen: Sequence[Mapping], dof: int) -> str | None:
+    def check(self, seen: Sequence[Mapping], dof: int, evaluations: int = 0) -> str | None:
         """Why the fit stops after the last of its iterations ``seen`` (Levenberg-Marquardt's
-        history entries, with ``iteration`` and ``cost``; ``dof`` its degrees of freedom), or
-        None to go on. Never at the start point."""
+        history entries, with ``iteration`` and ``cost``; ``dof`` its degrees of freedom;
+        ``evaluations`` of the objective so far), or None to go on. Never at the start
+        point."""
         h = seen[-1]
         if h["iteration"] < 1:
             return None
-        if self.out_of_time():
-            return OUT_OF_TIME
+        if self.out_of_work(evaluations):
+            return OUT_OF_WORK
         stalled = h["cost"] > (1 - STALL) * seen[-2]["cost"]
         if (
             self.reweigh_drop is not None
@@ -160,17 +236,17 @@ class _Stop(Exception):
 
 class _Remember:
     """The objective, remembering its residuals at the last point with a Jacobian (the
-    iterate Levenberg-Marquardt accepted last), and stopping the fit at an evaluation once
-    the rule's deadline is past (an evaluation far from the measurement, with steps that need
-    sub-steps, can take longer than a whole fit near it)."""
+    iterate Levenberg-Marquardt accepted last), and stopping the fit before an evaluation past
+    the rule's allowance (a trial step rejected again and again spends evaluations without an
+    iteration)."""
 
     def __init__(self, obj: FRFObjective, rule: StopRule = StopRule()) -> None:
         self.obj, self.x, self.r, self.rule = obj, None, None, rule
         self.calls = 0  # evaluations, with or without the Jacobian
 
     def __call__(self, x, want_jac):
-        if self.x is not None and self.rule.out_of_time():
-            raise _Stop(OUT_OF_TIME)
+        if self.x is not None and self.rule.out_of_work(self.calls):
+            raise _Stop(OUT_OF_WORK)
         self.calls += 1
         r, J = self.obj(x, want_jac)
         if want_jac:
@@ -179,20 +255,21 @@ class _Remember:
 
 
 def _lm_until(
-    obj: FRFObjective, theta, rule: StopRule, max_iterations: int, ftol: float, progress
+    obj: FRFObjective, theta, rule: StopRule, limits: FitLimits, progress: Listener | None
 ) -> LeastSquaresResult:
     """Bounded Levenberg-Marquardt from ``theta`` until its own criteria or ``rule`` stop it;
-    the result's ``message`` says which (a stopped fit's is one of :data:`OUT_OF_TIME`,
+    the result's ``message`` says which (a stopped fit's is one of :data:`OUT_OF_WORK`,
     :data:`NO_BETTER`, :data:`REWEIGH`)."""
     space = obj.space
     fun = _Remember(obj, rule)
     seen: list[dict] = []
+    tell = iterations(LM_STAGE, progress)
 
     def watch(h: dict) -> None:
         seen.append(h)
-        if progress:
-            progress("lm", h)
-        reason = rule.check(seen, max(fun.r.size - space.size, 1))
+        if tell:
+            tell(h)
+        reason = rule.check(seen, max(fun.r.size - space.size, 1), fun.calls)
         if reason is not None:
             raise _Stop(reason)
 
@@ -201,8 +278,8 @@ def _lm_until(
             fun,
             theta,
             bounds=space.theta_bounds(),
-            max_iterations=max_iterations,
-            ftol=ftol,
+            max_iterations=limits.max_iterations,
+            ftol=limits.ftol,
             callback=watch,
         )
     except _Stop as stop:
@@ -248,20 +325,11 @@ def refit(
     parameters: Sequence[str],
     *,
     rows: np.ndarray | None = None,
-    starts: Sequence[Mapping[str, float]] = (),
-    distributions: Mapping[str, Distribution] | None = None,
-    n_random_starts: int = 0,
-    n_lm_starts: int = 1,
-    seed: int = 0,
-    max_iterations: int = 30,
-    ftol: float = 1e-6,
+    starts: Starts = Starts(),
+    limits: FitLimits = FitLimits(),
     n_harmonics: int = 9,
     n_time: int = 128,
-    progress: Callable[[str, dict], None] | None = None,
-    max_seconds: float | None = None,
-    give_up_chi2: float | None = None,
-    reweight_passes: int = 0,
-    reweight_drop: float | None = None,
+    progress: Listener | None = None,
 ) -> Refit:
     """Fit ``parameters`` of ``model`` to the stepped-sine FRFs of ``data``.
 
@@ -275,113 +343,75 @@ def refit(
         is the modal damping ratio of mode ``n`` (log scaled, 1e-4 to 0.2).
     rows : ndarray of int, optional
         Steps fitted (default: all). Steps where the start model does not converge are left out.
-    starts : sequence of mapping
-        Further start values (missing names keep the model's value).
-    distributions : mapping name -> Distribution, optional
-        With ``n_random_starts``: Latin hypercube starts (the paper's method).
-    n_lm_starts : int
-        The best starts (by the metric) refined by Levenberg-Marquardt.
-    max_iterations : int
-    ftol : float
-        Stop when an iteration lowers the metric by less than this fraction.
+    starts : Starts
+        Where the fits start and how many are refined.
+    limits : FitLimits
+        When Levenberg-Marquardt stops, and the passes with the weights recomputed.
     n_harmonics, n_time : int
         Balance settings of the predictions.
     progress : callable, optional
-        ``progress(stage, info)``: ``"start"`` per start evaluated, ``"lm"`` per iteration.
-    max_seconds : float, optional
-        Processor time allowed to Levenberg-Marquardt (this process's, so a fit does the same
-        work however busy the machine is): it stops at its first evaluation past it and
-        returns the last accepted iterate.
-    give_up_chi2 : float, optional
-        Stop (keeping the last iterate) when the last iteration lowered the chi-square per
-        degree of freedom by less than half and it is still above this two or more iterations
-        in, or above twice this after the first: a candidate that does no better than the
-        model without it.
-    reweight_passes : int
-        Further Levenberg-Marquardt fits, each from the last one's values with the weights
-        (the force's error through the model) recomputed there. The first fit weighs the
-        steps by the start model's tangents, which can be far from the fitted model's near
-        a jump. Of all passes, the fit whose own weights give it the lowest metric is kept;
-        its ``history`` runs through the passes up to it (``"pass"`` numbers them, and each
-        pass starts with the metric at the same values under the new weights).
-    reweight_drop : float, optional
-        Recompute the weights when an iteration stalls (lowers the metric by less than
-        :data:`STALL`) at a metric ``reweight_drop`` times or more below the one they were
-        computed at (the model has moved far from the start whose tangents they hold), and go
-        on from there with the iterations and processor time left; again at each such stall
-        (Levenberg-Marquardt on stale weights stalls far above the noise: docs/diagnosis.md,
-        the rules table).
+        Receives :mod:`analysis.events`: a :class:`~analysis.events.UnitDone` per start scored
+        (stage ``"starts"``), an :class:`~analysis.events.Iteration` per Levenberg-Marquardt
+        iteration (stage :data:`LM_STAGE`).
 
     Returns
     -------
     Refit
     """
-    if reweight_passes:
+    if limits.reweight_passes:
         again = functools.partial(
             refit,
             data=data,
             parameters=parameters,
             rows=rows,
-            ftol=ftol,
             n_harmonics=n_harmonics,
             n_time=n_time,
             progress=progress,
-            max_seconds=max_seconds,
-            reweight_drop=reweight_drop,
         )
-        first = again(
-            model,
-            starts=starts,
-            distributions=distributions,
-            n_random_starts=n_random_starts,
-            n_lm_starts=n_lm_starts,
-            seed=seed,
-            max_iterations=max_iterations,
-            give_up_chi2=give_up_chi2,
-        )
-        return _reweighted(first, again, reweight_passes, max_iterations)
+        first = again(model, starts=starts, limits=dataclasses.replace(limits, reweight_passes=0))
+        # later passes start from one fit's values and give up on nothing
+        later = dataclasses.replace(limits, reweight_passes=0, give_up_chi2=None)
+
+        def next_pass(m: Model, max_iterations: int) -> Refit:
+            return again(m, limits=dataclasses.replace(later, max_iterations=max_iterations))
+
+        return _reweighted(first, next_pass, limits.reweight_passes, limits.max_iterations)
     t0 = time.perf_counter()
     names = tuple(parameters)
     rows = np.arange(data.n_steps) if rows is None else np.asarray(rows)
     obj, base, good = _converged_objective(model, data, names, rows, n_harmonics, n_time)
     space = obj.space
     p0 = np.array([_current(model, n) for n in names])
-    thetas = _start_thetas(space, names, p0, starts, distributions, n_random_starts, seed)
+    thetas = _start_thetas(space, names, p0, starts)
     whole = good.size == rows.size
     costs, n_start_evaluations = _start_costs(obj, thetas, p0, base if whole else None, progress)
-    deadline = None if max_seconds is None else time.process_time() + max_seconds
+    drop = limits.reweight_drop if starts.n_lm == 1 else None
+    rule = StopRule(limits.max_evaluations, limits.give_up_chi2, drop)
     best, reweigh, n_lm_evaluations = _lm_from_starts(
-        obj,
-        thetas,
-        costs,
-        n_lm_starts,
-        StopRule(deadline, give_up_chi2, reweight_drop if n_lm_starts == 1 else None),
-        max_iterations,
-        ftol,
-        progress,
+        obj, thetas, costs, starts.n_lm, rule, limits, progress
     )
     if len(thetas) == 1 and best is not None and best.history:
         costs = np.array([best.history[0]["cost"]])
     out = _as_refit(model, names, space, best, costs, t0)
     # the start model's prediction, the starts' metrics, Levenberg-Marquardt's evaluations
     out.evaluations = 1 + n_start_evaluations + n_lm_evaluations
-    left = None if deadline is None else deadline - time.process_time()
-    if not reweigh or best.nit >= max_iterations or (left is not None and left <= 0):
+    cap = limits.max_evaluations
+    left = None if cap is None else cap - n_lm_evaluations
+    if not reweigh or best.nit >= limits.max_iterations or (left is not None and left <= 0):
         return out
+    rest = dataclasses.replace(
+        limits, max_iterations=limits.max_iterations - best.nit, max_evaluations=left
+    )
     try:
         nxt = refit(
             out.model,
             data,
             parameters,
             rows=rows,
-            ftol=ftol,
+            limits=rest,
             n_harmonics=n_harmonics,
             n_time=n_time,
             progress=progress,
-            max_seconds=left,
-            give_up_chi2=give_up_chi2,
-            max_iterations=max_iterations - best.nit,
-            reweight_drop=reweight_drop,
         )
     except (RuntimeError, ValueError) as exc:  # the fitted model fails on a fitted step
         log.info("no fit with the weights recomputed: %s", exc)
@@ -406,20 +436,22 @@ def _converged_objective(model: Model, data, names, rows, n_harmonics: int, n_ti
     return obj, base, good
 
 
-def _start_thetas(space, names, p0, starts, distributions, n_random_starts: int, seed: int):
+def _start_thetas(space, names, p0, starts: Starts):
     """The starts in the fit's scaled coordinates, within its bounds: the model's values, the
     given starts, then the Latin hypercube's."""
     candidates = [p0]
-    for s in starts:
+    for s in starts.given:
         candidates.append(np.array([float(s.get(n, v)) for n, v in zip(names, p0, strict=True)]))
-    if n_random_starts:
-        dists = dict(distributions or {})
-        candidates += list(latin_hypercube(dists, n_random_starts, seed, names))
+    if starts.n_random:
+        dists = dict(starts.distributions or {})
+        candidates += list(latin_hypercube(dists, starts.n_random, starts.seed, names))
     lo, hi = space.theta_bounds()
     return np.clip(np.array([space.to_theta(c) for c in candidates]), lo, hi)
 
 
-def _start_costs(obj: FRFObjective, thetas, p0, base, progress) -> tuple[np.ndarray, int]:
+def _start_costs(
+    obj: FRFObjective, thetas, p0, base, progress: Listener | None
+) -> tuple[np.ndarray, int]:
     """The metric at each start and the evaluations that took; ``base`` is the start model's
     prediction when it holds on every fitted step (the first start's metric without a
     solve)."""
@@ -440,7 +472,7 @@ def _start_costs(obj: FRFObjective, thetas, p0, base, progress) -> tuple[np.ndar
                 costs.append(obj.cost(th))
                 evaluations += 1
             if progress:
-                progress("start", {"index": i, "n": len(thetas), "cost": costs[-1]})
+                progress(UnitDone("starts", i + 1, len(thetas), cost=float(costs[-1])))
     out = np.array(costs)
     if len(thetas) > 1 and not np.isfinite(out).any():
         raise RuntimeError("no start gives a converged model response on the fitted steps")
@@ -453,19 +485,25 @@ def _lm_from_starts(
     costs,
     n_lm_starts: int,
     rule: StopRule,
-    max_iterations: int,
-    ftol: float,
-    progress,
+    limits: FitLimits,
+    progress: Listener | None,
 ) -> tuple[LeastSquaresResult | None, bool, int]:
-    """Levenberg-Marquardt from the ``n_lm_starts`` best starts; the best fit, whether it
-    stopped for its weights to be recomputed, and the evaluations of every start's fit."""
+    """Levenberg-Marquardt from the ``n_lm_starts`` best starts, sharing the rule's allowance
+    of evaluations; the best fit, whether it stopped for its weights to be recomputed, and the
+    evaluations of every start's fit."""
     best: LeastSquaresResult | None = None
     reweigh = False
     evaluations = 0
+    cap = rule.max_evaluations
     for k in np.argsort(costs)[:n_lm_starts]:
         if len(thetas) > 1 and not np.isfinite(costs[k]):
             continue
-        res = _lm_until(obj, thetas[k], rule, max_iterations, ftol, progress)
+        if cap is not None and evaluations >= cap:
+            break
+        left = None if cap is None else cap - evaluations
+        res = _lm_until(
+            obj, thetas[k], dataclasses.replace(rule, max_evaluations=left), limits, progress
+        )
         reweigh = reweigh or res.message == REWEIGH
         evaluations += res.nfev
         if best is None or res.cost < best.cost:
@@ -518,9 +556,11 @@ def _joined(out: Refit, nxt: Refit, nit: int, t0: float) -> Refit:
     )
 
 
-def _reweighted(fit: Refit, again: Callable[..., Refit], passes: int, max_iterations: int) -> Refit:
-    """:func:`refit`'s further passes after ``fit``: ``again(model, max_iterations=...)`` fits
-    from the model's values with the weights recomputed there."""
+def _reweighted(
+    fit: Refit, again: Callable[[Model, int], Refit], passes: int, max_iterations: int
+) -> Refit:
+    """:func:`refit`'s further passes after ``fit``: ``again(model, max_iterations)`` fits from
+    the model's values with the weights recomputed there."""
     t0 = time.perf_counter() - fit.seconds
     fits, own = [fit], []
     evaluations = fit.evaluations
@@ -528,7 +568,7 @@ def _reweighted(fit: Refit, again: Callable[..., Refit], passes: int, max_iterat
         # one start, the last fit's values: its first metric is the last fit's own one
         last = k > passes
         try:
-            nxt = again(fits[-1].model, max_iterations=0 if last else max_iterations)
+            nxt = again(fits[-1].model, 0 if last else max_iterations)
         except (RuntimeError, ValueError) as exc:  # the fitted model fails on a fitted step
             log.info("reweighting stopped after pass %d: %s", k - 1, exc)
             own.append(np.inf)

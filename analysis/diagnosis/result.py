@@ -17,6 +17,16 @@ from analysis.settings import Integer, NonNegative, Positive, declare, settings
 
 __all__ = ["Diagnosis", "DiagnosisSettings", "RankedCandidate"]
 
+# The work allowances of a diagnosis, in evaluations of the objective (the balance on every
+# fitted step, with or without its Jacobian). Counting work, not time, keeps a diagnosis the
+# same on any machine and under any load (docs/diagnosis.md, "Limits"). A verification's 25
+# leave its 8 iterations about two rejected trial steps each; the stage's 90 is about six
+# verifications, the first ones and the walks; a continued fit's 65, two passes of 8
+# iterations with their rejections.
+VERIFY_EVALUATIONS = 25
+CONTINUE_EVALUATIONS = 65
+BUDGET_EVALUATIONS = 90
+
 
 @settings()
 class DiagnosisSettings:
@@ -65,24 +75,26 @@ class DiagnosisSettings:
     verify_iterations: Integer = declare(
         "Levenberg-Marquardt iterations per verification.", 8, ge=1
     )
-    verify_seconds: Positive = declare(
-        "Processor time allowed for one verification's Levenberg-Marquardt [s] (its last "
-        "iterate is scored).",
-        12.0,
+    verify_evaluations: Integer = declare(
+        "Evaluations of the objective (the balance on every fitted step) allowed to one "
+        "verification's Levenberg-Marquardt (its last iterate is scored).",
+        VERIFY_EVALUATIONS,
+        ge=1,
     )
     reweight_drop: Positive = declare(
         "A verification recomputes its weights when it stalls at a metric this many times "
         "below the one they were computed at.",
         2.0,
     )
-    continue_seconds: NonNegative = declare(
-        "When nothing explains the misfit, verifications stopped for time while still "
-        "improving go on for this much processor time [s].",
-        30.0,
+    continue_evaluations: Integer = declare(
+        "When nothing explains the misfit, verifications stopped at their allowance while "
+        "still improving go on for this many evaluations of the objective.",
+        CONTINUE_EVALUATIONS,
+        ge=0,
     )
     continue_decrease: NonNegative = declare(
-        "Verifications stopped for time go on only if their last iteration lowered the metric "
-        "by this share or more.",
+        "Verifications stopped at their allowance go on only if their last iteration lowered "
+        "the metric by this share or more.",
         0.1,
     )
     n_starts: Integer = declare(
@@ -95,10 +107,11 @@ class DiagnosisSettings:
     )
     n_harmonics: Integer = declare("Harmonics of the balance in every prediction.", 9, ge=1)
     n_time: Integer = declare("Time samples per period of the balance's AFT.", 128, ge=8)
-    time_budget_s: NonNegative = declare(
+    budget_evaluations: Integer = declare(
         "Continued fits, the second stage and further starts begin only while the "
-        "verifications so far used less processor time than this [s].",
-        40.0,
+        "verifications so far made fewer evaluations of the objective than this.",
+        BUDGET_EVALUATIONS,
+        ge=0,
     )
     restart_fraction: Positive = declare(
         "Further starts only for a best candidate that brought the recalibrated model's "

@@ -45,7 +45,7 @@ import copy
 import dataclasses
 import logging
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -59,6 +59,7 @@ from analysis.diagnosis.candidates import (
     release_joint,
 )
 from analysis.elements import make_element
+from analysis.events import Listener, UnitDone
 from analysis.measurement_file import SteppedSineData
 from analysis.mhb.aft import element_forces
 from analysis.mhb.harmonics import HarmonicBasis
@@ -577,7 +578,7 @@ class Screen:
         self,
         candidates: Sequence[Candidate],
         n_refine: int = 12,
-        progress: Callable | None = None,
+        progress: Listener | None = None,
         executor=None,
     ) -> list[ScreenFit]:
         """Fit every candidate in one pass at the data's states, then the best ``n_refine``
@@ -605,7 +606,9 @@ class Screen:
             fits += later.result()
         return self.refine(fits, n_refine, progress)
 
-    def first_pass(self, candidates: Sequence[Candidate], progress=None) -> list[ScreenFit]:
+    def first_pass(
+        self, candidates: Sequence[Candidate], progress: Listener | None = None
+    ) -> list[ScreenFit]:
         """One pass of every candidate at the data's states, best first."""
         fits = []
         for i, c in enumerate(candidates):
@@ -614,17 +617,19 @@ class Screen:
             except (ValueError, np.linalg.LinAlgError) as exc:
                 log.warning("screen of %s failed: %s", c.label, exc)
             if progress:
-                progress("screen", {"index": i, "n": len(candidates), "label": c.label})
+                progress(UnitDone("screen", i + 1, len(candidates), c.label))
         return sorted(fits, key=lambda f: f.bic)
 
-    def refine(self, fits: list[ScreenFit], n_refine: int, progress=None) -> list[ScreenFit]:
+    def refine(
+        self, fits: list[ScreenFit], n_refine: int, progress: Listener | None = None
+    ) -> list[ScreenFit]:
         """The best ``n_refine`` fits again with the alternations (the better of the two
         kept); every fit sorted by BIC."""
         fits = sorted(fits, key=lambda f: f.bic)
         for i, f in enumerate(fits[:n_refine]):
             fits[i] = self.refined(f)
             if progress:
-                progress("refine", {"index": i, "n": n_refine, "label": f.candidate.label})
+                progress(UnitDone("refine", i + 1, n_refine, f.candidate.label))
         return sorted(fits, key=lambda f: f.bic)
 
     def refined(self, f: ScreenFit) -> ScreenFit:

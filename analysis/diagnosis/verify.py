@@ -27,7 +27,7 @@ from analysis.calibration.lhs import Distribution, paper_distributions
 from analysis.calibration.nonlinear import fitted_rows
 from analysis.diagnosis.candidates import Candidate
 from analysis.diagnosis.compare import compare
-from analysis.diagnosis.refit import refit
+from analysis.diagnosis.refit import FitLimits, Starts, refit
 from analysis.measurement_file import read_measurement
 from analysis.model import Model
 from analysis.predict_branches import BranchMatchedPredictor
@@ -78,9 +78,9 @@ class VerifyJob:
         the linear test (:mod:`analysis.diagnosis.linear_screen`); used instead of adding it.
     n_harmonics, n_time : int
         Balance settings.
-    max_seconds : float or None
-        Processor time allowed for the recalibration's Levenberg-Marquardt (the last accepted
-        iterate is kept).
+    max_evaluations : int or None
+        Evaluations of the objective allowed to the recalibration's Levenberg-Marquardt (the
+        last accepted iterate is kept): :class:`~analysis.diagnosis.refit.FitLimits`.
     give_up_chi2 : float or None
         The recalibration stops early when it stays above this chi-square per degree of
         freedom (the model recalibrated without the candidate):
@@ -107,7 +107,7 @@ class VerifyJob:
     start_toml: str | None = None
     n_harmonics: int = 9
     n_time: int = 128
-    max_seconds: float | None = None
+    max_evaluations: int | None = None
     give_up_chi2: float | None = None
     reweight_passes: int = 0
     reweight_drop: float | None = None
@@ -327,18 +327,17 @@ def _verify(job: VerifyJob, t0: float) -> Verified:
             data,
             names,
             rows=rows if rows.size else None,
-            starts=_scaled_starts(job, m2),
-            distributions=dists,
-            n_random_starts=job.n_starts,
-            seed=job.seed,
-            max_iterations=job.max_iterations,
-            ftol=1e-4,
+            starts=Starts(_scaled_starts(job, m2), dists, job.n_starts, seed=job.seed),
+            limits=FitLimits(
+                max_iterations=job.max_iterations,
+                ftol=1e-4,
+                max_evaluations=job.max_evaluations,
+                give_up_chi2=job.give_up_chi2,
+                reweight_passes=job.reweight_passes,
+                reweight_drop=job.reweight_drop,
+            ),
             n_harmonics=job.n_harmonics,
             n_time=job.n_time,
-            max_seconds=job.max_seconds,
-            give_up_chi2=job.give_up_chi2,
-            reweight_passes=job.reweight_passes,
-            reweight_drop=job.reweight_drop,
         )
         fitted, history, params = r.model, r.history, r.parameters
         message = r.lm.message if r.lm is not None else ""

@@ -28,7 +28,7 @@ __all__ = ["ADVANCED", "BASIC", "GUI_DIAGNOSIS", "DiagnosisOptions"]
 GUI_DIAGNOSIS = DiagnosisSettings(workers=1)
 
 #: Diagnosis settings a first-time user sees; every other one is under *Advanced*.
-BASIC = ("time_budget_s",)
+BASIC = ("budget_evaluations",)
 #: The expert settings, closed under *Advanced* until opened.
 ADVANCED = tuple(f.name for f in dataclasses.fields(DiagnosisSettings) if f.name not in BASIC)
 

@@ -13,6 +13,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from analysis.events import Event, Iteration
 from rig.gui.style import (
     ALARM,
     OK,
@@ -179,11 +180,11 @@ class DiagnosisView(QtWidgets.QWidget):
             f"{before_rms:.3g} x noise)"
         )
 
-    def augment_progress(self, stage: str, info: dict) -> None:
-        """A progress report of :func:`analysis.diagnosis.augment` (``lm`` iterations)."""
-        if stage != "lm" or "cost" not in info:
+    def augment_progress(self, event: Event) -> None:
+        """An event of :func:`analysis.diagnosis.augment`: its iterations draw the cost."""
+        if not isinstance(event, Iteration):
             return
-        self._costs.append((int(info.get("iteration", len(self._costs))), float(info["cost"])))
+        self._costs.append((event.iteration, event.cost))
         it = np.array([i for i, _ in self._costs], dtype=float)
         cost = np.array([c for _, c in self._costs])
         item = self.error.getPlotItem()

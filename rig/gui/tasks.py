@@ -1,9 +1,9 @@
 """Slow work off the GUI thread: compare, diagnose, augment, plan.
 
-A :class:`Task` runs one function in a ``QThread``; the function gets a ``report(stage, info)``
-callback (the analysis functions' ``progress`` argument) whose calls arrive on the GUI thread
-as the :attr:`Task.progress` signal, followed by :attr:`Task.done` with the result or
-:attr:`Task.failed` with the error in words.
+A :class:`Task` runs one function in a ``QThread``; the function gets a ``report(event)``
+listener (the analysis functions' ``progress`` argument, :mod:`analysis.events`) whose events
+arrive on the GUI thread as the :attr:`Task.progress` signal, followed by :attr:`Task.done` with
+the result or :attr:`Task.failed` with the error in words.
 """
 
 from __future__ import annotations
@@ -14,11 +14,11 @@ from typing import Any
 
 from PySide6 import QtCore
 
+from analysis.events import Event, Listener
+
 __all__ = ["Task"]
 
 logger = logging.getLogger(__name__)
-
-Report = Callable[[str, dict], None]
 
 
 class Task(QtCore.QThread):
@@ -29,15 +29,15 @@ class Task(QtCore.QThread):
     name : str
         What it does, for messages ("diagnosis").
     work : callable(report) -> object
-        Runs in the worker thread; calls ``report(stage, info)`` to show progress.
+        Runs in the worker thread; calls ``report(event)`` to show progress.
     """
 
-    progress = QtCore.Signal(str, object)
+    progress = QtCore.Signal(object)
     done = QtCore.Signal(object)
     failed = QtCore.Signal(str)
 
     def __init__(
-        self, name: str, work: Callable[[Report], Any], parent: QtCore.QObject | None = None
+        self, name: str, work: Callable[[Listener], Any], parent: QtCore.QObject | None = None
     ) -> None:
         super().__init__(parent)
         self.name = name
@@ -45,8 +45,8 @@ class Task(QtCore.QThread):
         self.result: Any = None
         self.error = ""
 
-    def _report(self, stage: str, info: dict) -> None:
-        self.progress.emit(stage, dict(info))
+    def _report(self, event: Event) -> None:
+        self.progress.emit(event)
 
     def run(self) -> None:  # noqa: D401 - QThread entry point
         try:

@@ -24,6 +24,7 @@ from analysis.diagnosis import (
     compare,
     diagnose,
 )
+from analysis.events import Event, Iteration, StageDone, UnitDone
 from analysis.measurement_file import MeasurementFileError, SteppedSineData, read_measurement
 from analysis.model import load_model
 from rig.gui.comparison_view import ComparisonView
@@ -292,20 +293,20 @@ class WorkbenchPanel(QtWidgets.QWidget):
         self.progress.hide()
         self._buttons()
 
-    def _progress(self, stage: str, info: dict) -> None:
-        if "index" in info and "n" in info:
-            self.progress.setRange(0, int(info["n"]))
-            self.progress.setValue(int(info["index"]) + 1)
-            label = info.get("label", "")
-            self._say(f"{stage} {int(info['index']) + 1}/{info['n']}: {label}")
+    def _progress(self, event: Event) -> None:
+        """A task's :mod:`analysis.events`: counted units on the progress bar, iterations and
+        milestones in the status line."""
+        if isinstance(event, UnitDone) and event.total:
+            self.progress.setRange(0, event.total)
+            self.progress.setValue(event.done)
+            label = f": {event.label}" if event.label else ""
+            self._say(f"{event.stage} {event.done}/{event.total}{label}")
             return
         self.progress.setRange(0, 0)
-        parts = [
-            f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
-            for k, v in info.items()
-            if isinstance(v, int | float | str)
-        ]
-        self._say(f"{stage}: {', '.join(parts)}")
+        if isinstance(event, Iteration):
+            self._say(f"{event.stage}: iteration {event.iteration}, metric {event.cost:.4g}")
+        elif isinstance(event, StageDone):
+            self._say(event.text())
 
     # -- compare, diagnose, augment ----------------------------------------------------------
     def compare(self) -> bool:
@@ -396,13 +397,9 @@ class WorkbenchPanel(QtWidgets.QWidget):
                 progress=report,
             )
 
-        def progress(stage: str, info: dict) -> None:
-            self.diagnosis_view.augment_progress(stage, info)
-            if stage == "lm":
-                self._say(
-                    f"recalibrating: LM iteration {info.get('iteration')}, cost "
-                    f"{info.get('cost', float('nan')):.4g}"
-                )
+        def progress(event: Event) -> None:
+            self.diagnosis_view.augment_progress(event)
+            self._progress(event)
 
         return self._start("recalibration", work, self._augmented, progress)
 

@@ -138,3 +138,25 @@ def test_lhs_costs_report_every_start():
     )
     assert costs.tolist() == [2.0] * 6
     assert seen == [(k, 6) for k in range(0, 7)]
+
+
+def test_analysis_events_are_shown_and_milestones_round_trip_as_json():
+    """A reporter is a listener of :mod:`analysis.events`: a counted unit updates its stage,
+    an optimiser's last iteration ends its count, a milestone is a line at once (as text, and
+    as a JSON line ``parse_line`` reads back)."""
+    from analysis.events import Iteration, StageDone, UnitDone
+
+    text = io.StringIO()
+    r = ProgressReporter("text", text, prefix="calibration: ")
+    r.event(UnitDone("Latin hypercube starts", 100, 100, cost=3.2))
+    r.event(Iteration("Levenberg-Marquardt", 7, 1.25, last=True))
+    r.event(StageDone("Latin hypercube starts", count=100, cost=3.2, seconds=41.0))
+    lines = text.getvalue().splitlines()
+    assert lines[0].startswith("calibration: Latin hypercube starts 100/100")
+    assert "Levenberg-Marquardt iterations 7/7" in lines[1] and "metric 1.25" in lines[1]
+    assert lines[2] == "calibration: Latin hypercube starts: 100, metric 3.2, 41.0 s"
+
+    stream = io.StringIO()
+    ProgressReporter("json", stream).event(StageDone("screened", count=226, seconds=12.5))
+    p = parse_line(stream.getvalue().strip())
+    assert p is not None and (p.stage, p.done, p.total, p.elapsed_s) == ("screened", 226, 226, 12.5)

@@ -7,18 +7,18 @@ from __future__ import annotations
 import pytest
 
 from analysis.diagnosis import DiagnosisSettings, augment, default_candidates, diagnose
+from analysis.diagnosis.result import BUDGET_EVALUATIONS, VERIFY_EVALUATIONS
 from tests.analysis.diagnosis.conftest import truth_as_model
 
-# limits of processor time above the benchmark's: the verifications must converge on the reduced
-# runs
+# work allowances above the defaults: the verifications must converge on the reduced runs
 QUICK = DiagnosisSettings(
     n_verify=2,
     n_refine=4,
     n_starts=0,
     workers=2,
     verify_iterations=10,
-    verify_seconds=20.0,
-    time_budget_s=100.0,
+    verify_evaluations=2 * VERIFY_EVALUATIONS,
+    budget_evaluations=5 * BUDGET_EVALUATIONS // 2,
 )
 
 

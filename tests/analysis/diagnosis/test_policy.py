@@ -34,12 +34,12 @@ def test_the_summary_reads_a_verification() -> None:
         2,
         "",
         history=[{"chi2_per_dof": 10.0}, {"chi2_per_dof": 4.0}],
-        message="stopped: the time allowed is up",
-        cpu_seconds=3.5,
+        message="stopped: the evaluations allowed are used",
+        evaluations=14,
     )
     s = FitSummary.of(v)
     assert s.chi2_per_dof == pytest.approx(4.0) and s.rms_over_noise == pytest.approx(2.0)
-    assert s.stopped and not s.failed and s.spent == 3.5
+    assert s.stopped and not s.failed and s.spent == 14
     assert s.last_decrease == pytest.approx(0.6)
 
 
@@ -64,11 +64,11 @@ def test_before_the_verifications(refit_rms, calibrated_rms, adequate, rescreen)
 
 def test_the_optional_picks_stop_at_the_noise_or_when_the_allowance_is_spent() -> None:
     p = policy(30.0)
-    half = ST.time_budget_s / 2
+    half = ST.budget_evaluations / 2
     assert not p.enough([fit(10.0, spent=half), fit(5.0, spent=half - 1)])
     assert p.enough([fit(10.0, spent=half), fit(5.0, spent=half)])
     assert p.enough([fit(ST.adequate_rms, spent=1.0)])
-    assert p.left([fit(3.0, spent=10.0)]) == ST.time_budget_s - 10.0
+    assert p.left([fit(3.0, spent=10.0)]) == ST.budget_evaluations - 10.0
     assert p.unexplained([fit(ST.explained_rms * 1.01)])
     assert not p.unexplained([fit(9.0), fit(ST.explained_rms)])
     assert p.unexplained([])
@@ -79,7 +79,7 @@ def test_a_fit_that_went_most_of_the_way_goes_on() -> None:
     less go on; with allowance left, fits stopped while still falling fast too; two at most,
     best first, counting those gone on already; none once one explains the misfit."""
     p = policy(100.0)
-    spent = ST.time_budget_s
+    spent = ST.budget_evaluations
     done = [
         fit(70.0, stopped=True, fall=0.6),  # falling fast but far
         fit(2.8, stopped=True, fall=0.005),  # most of the way
@@ -119,7 +119,7 @@ def test_where_the_best_walks(kind, best_rms, refit_rms, walk) -> None:
 
 def test_the_second_stage_and_the_restarts() -> None:
     p = policy(100.0)
-    spent = fit(90.0, spent=ST.time_budget_s)
+    spent = fit(90.0, spent=ST.budget_evaluations)
     assert p.second_stage([fit(10.0)], 2)
     assert not p.second_stage([fit(10.0)], 0)
     assert not p.second_stage([fit(1.5)], 2)

@@ -9,8 +9,10 @@ import pytest
 
 from analysis.diagnosis import default_candidates
 from analysis.diagnosis.compare import compare
-from analysis.diagnosis.refit import refit
+from analysis.diagnosis.refit import OUT_OF_WORK, FitLimits, Starts, StopRule, refit
 from analysis.predict_branches import BranchMatchedPredictor
+
+ONE = FitLimits(max_iterations=1)
 
 
 def _chi2_on(model, data, rows) -> float:
@@ -33,8 +35,8 @@ def test_fitting_again_with_the_weights_at_the_fit_scores_better(runs, reference
     # a far start (the truth: slip moment 3 N m, 5e4 N m/rad): its tangents near the jump
     # differ from the fitted model's
     start, names = cand.apply(reference_model, {"f_slip": 1.5, "k_joint": 1e5})
-    once = refit(start, data, names, rows=rows, max_iterations=15)
-    again = refit(start, data, names, rows=rows, max_iterations=15, reweight_passes=1)
+    once = refit(start, data, names, rows=rows, limits=FitLimits(max_iterations=15))
+    again = refit(start, data, names, rows=rows, limits=FitLimits(15, reweight_passes=1))
 
     first = _chi2_on(once.model, data, rows)
     kept = _chi2_on(again.model, data, rows)
@@ -115,8 +117,8 @@ def test_recomputing_the_weights_at_a_stall_scores_no_worse(runs, reference_mode
         if c.label == "coulomb_friction with a joint spring at joint clamp rz"
     )
     start, names = cand.apply(reference_model, {"f_slip": 1.5, "k_joint": 1e5})
-    once = refit(start, data, names, rows=rows, max_iterations=15)
-    drop = refit(start, data, names, rows=rows, max_iterations=15, reweight_drop=2.0)
+    once = refit(start, data, names, rows=rows, limits=FitLimits(max_iterations=15))
+    drop = refit(start, data, names, rows=rows, limits=FitLimits(15, reweight_drop=2.0))
     passes = [h.get("pass", 0) for h in drop.history]
     assert passes == sorted(passes) and passes[-1] >= 1, drop.history
     assert drop.history[-1]["iteration"] <= 15
@@ -138,9 +140,9 @@ def test_the_start_model_is_not_solved_again_to_rank_the_starts(
     calls = []
     cost = FRFObjective.cost
     monkeypatch.setattr(FRFObjective, "cost", lambda self, th: calls.append(th) or cost(self, th))
-    two = refit(reference_model, data, ["k_c"], starts=[{"k_c": 1.2 * k}], max_iterations=1)
+    two = refit(reference_model, data, ["k_c"], starts=Starts([{"k_c": 1.2 * k}]), limits=ONE)
     assert len(calls) == 1  # the further start only
-    one = refit(reference_model, data, ["k_c"], max_iterations=1)
+    one = refit(reference_model, data, ["k_c"], limits=ONE)
     assert one.start_costs[0] == pytest.approx(two.start_costs[0], rel=1e-9)
     assert two.start_costs[1] > two.start_costs[0]  # the model's own k_c fits better
 
@@ -205,15 +207,55 @@ def test_a_stopped_fit_ends_at_its_last_iterate_and_says_why() -> None:
         return r, J
 
     fake = type("Obj", (), {"space": space, "__call__": staticmethod(obj)})()
-    free = _lm_until(fake, np.zeros(2), StopRule(), 20, 1e-12, None)
+    limits = FitLimits(max_iterations=20, ftol=1e-12)
+    free = _lm_until(fake, np.zeros(2), StopRule(), limits, None)
     assert free.success and np.allclose(free.x, target, atol=1e-6)
     assert free.nfev == len(calls)  # every evaluation counted, with the Jacobian or not
     calls.clear()
     # a bar no fit can get under: chi2/dof = 2 cost / (12 - 2) >= 1 > 0.1
-    stopped = _lm_until(fake, np.zeros(2), StopRule(give_up_chi2=0.1), 20, 1e-12, None)
+    stopped = _lm_until(fake, np.zeros(2), StopRule(give_up_chi2=0.1), limits, None)
     assert stopped.message == NO_BETTER and not stopped.success
     assert stopped.nfev == len(calls)
     assert stopped.nit == len(stopped.history) - 1 >= 1
     x = np.array(stopped.history[-1]["x"])
     assert np.array_equal(stopped.x, x)
     assert stopped.cost == pytest.approx(0.5 * float(np.sum((x - target) ** 2)) + 5.0)
+
+
+def test_the_stop_rule_counts_evaluations_not_time() -> None:
+    """The allowance is work: past it the rule stops a fit whatever the clock says, before
+    it the rule lets it go on (never at the start point)."""
+    seen = [{"iteration": 0, "cost": 10.0}, {"iteration": 1, "cost": 5.0}]
+    rule = StopRule(max_evaluations=4)
+    assert rule.check(seen[:1], dof=10, evaluations=99) is None
+    assert rule.check(seen, dof=10, evaluations=3) is None
+    assert rule.check(seen, dof=10, evaluations=4) == OUT_OF_WORK
+    assert StopRule().check(seen, dof=10, evaluations=10**6) is None
+
+
+def test_a_fit_stopped_at_its_allowance_ends_at_its_last_iterate() -> None:
+    """Out of evaluations, Levenberg-Marquardt stops before the next one and keeps its last
+    accepted iterate; the same allowance gives the same iterate every time (it counts work,
+    not time)."""
+    from types import SimpleNamespace
+
+    from analysis.diagnosis.refit import _lm_until
+
+    space = SimpleNamespace(size=2, theta_bounds=lambda: (np.full(2, -10.0), np.full(2, 10.0)))
+
+    def obj(x, want_jac):  # a Rosenbrock valley: many iterations to its minimum at (1, 1)
+        r = np.array([10 * (x[1] - x[0] ** 2), 1 - x[0]])
+        J = np.array([[-20 * x[0], 10.0], [-1.0, 0.0]]) if want_jac else None
+        return r, J
+
+    fake = type("Obj", (), {"space": space, "__call__": staticmethod(obj)})()
+    limits = FitLimits(max_iterations=100, ftol=1e-15)
+    start = np.array([-1.2, 1.0])
+    free = _lm_until(fake, start, StopRule(), limits, None)
+    assert free.nfev > 6 and np.allclose(free.x, 1.0, atol=1e-4)
+    runs = [_lm_until(fake, start, StopRule(max_evaluations=6), limits, None) for _ in range(2)]
+    for r in runs:
+        assert r.message == OUT_OF_WORK and not r.success
+        assert r.nfev <= 6
+        assert np.array_equal(r.x, np.array(r.history[-1]["x"]))
+    assert np.array_equal(runs[0].x, runs[1].x) and runs[0].nit == runs[1].nit >= 1

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from PySide6 import QtCore
 
+from analysis.events import Event, Iteration
 from analysis.model import load_model
 from tests.rig.gui.gui_helpers import make_window, screenshot
 
@@ -18,13 +19,13 @@ pytestmark = pytest.mark.slow
 TASK_MS = 120_000
 
 
-def _run_task(qtbot, bench, button, name: str) -> list[tuple[str, dict]]:
-    """Click ``button``, collect the task's progress reports, wait for it to succeed."""
-    reports: list[tuple[str, dict]] = []
+def _run_task(qtbot, bench, button, name: str) -> list:
+    """Click ``button``, collect the task's progress events, wait for it to succeed."""
+    reports: list = []
     with qtbot.waitSignal(bench.task_finished, timeout=TASK_MS) as blocker:
         qtbot.mouseClick(button, QtCore.Qt.MouseButton.LeftButton)
         assert bench.task is not None and bench.busy
-        bench.task.progress.connect(lambda stage, info: reports.append((stage, info)))
+        bench.task.progress.connect(reports.append)
     assert blocker.args == [name, True], bench.stage.text()
     assert not bench.busy
     return reports
@@ -59,8 +60,9 @@ def test_diagnosis_finds_the_damper_and_adding_it_brings_the_residual_to_the_noi
     bench.options.locations.setText("point 5, point 6, point 7")
     bench.options.laws.setText("quadratic_damper, linear_damper, cubic_spring")
     reports = _run_task(qtbot, bench, bench.diagnose_button, "diagnosis")
-    stages = {stage for stage, _ in reports}
-    assert {"compare", "screen", "verified"} <= stages, stages
+    stages = {e.stage for e in reports}
+    assert {"compared", "screen", "verified"} <= stages, stages
+    assert all(isinstance(e, Event) for e in reports)
     d = bench.diagnosis
     assert d.verdict == "explained", d.summary()
     assert d.group[0].candidate.law.kind == "quadratic_damper"
@@ -76,7 +78,8 @@ def test_diagnosis_finds_the_damper_and_adding_it_brings_the_residual_to_the_noi
 
     bench.options.starts.setValue(0)
     reports = _run_task(qtbot, bench, bench.augment_button, "recalibration")
-    assert any(stage == "lm" for stage, _ in reports)
+    assert any(isinstance(e, Iteration) for e in reports)
+    assert bench.diagnosis_view.error.getPlotItem().listDataItems()  # the cost drawn
     added = bench.augmented
     assert added.candidate.law.kind == "quadratic_damper"
     assert added.after.rms_over_noise < 1.5 < 5 < added.before.rms_over_noise
