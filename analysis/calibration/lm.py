@@ -13,12 +13,15 @@ J. SIAM 11 (1963) 431-441.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["LeastSquaresResult", "least_squares_lm"]
+__all__ = ["OUT_OF_EVALUATIONS", "LeastSquaresResult", "least_squares_lm"]
+
+#: The message of a fit stopped at its ``max_evaluations``.
+OUT_OF_EVALUATIONS = "stopped: the evaluations allowed are used"
 
 
 @dataclass
@@ -67,6 +70,8 @@ def least_squares_lm(
     ftol: float = 1e-8,
     xtol: float = 1e-8,
     callback: Callable[[dict], None] | None = None,
+    max_evaluations: int | None = None,
+    stop: Callable[[Sequence[dict], np.ndarray], str | None] | None = None,
 ) -> LeastSquaresResult:
     """Bounded Levenberg-Marquardt (or undamped Gauss-Newton with ``damped=False``).
 
@@ -84,6 +89,15 @@ def least_squares_lm(
         Stop when the relative cost decrease and the step (relative to ``|x| + xtol``) are small.
     callback : callable, optional
         Called with each history entry.
+    max_evaluations : int, optional
+        Evaluations of ``fun`` allowed (with or without the Jacobian, the start's included):
+        the fit stops before the first one past them, at the last accepted iterate, with
+        :data:`OUT_OF_EVALUATIONS` as its message.
+    stop : callable, optional
+        ``stop(history, r)`` after each accepted iteration (``r`` the residuals there): a
+        message to stop the fit there (not a success), or None to go on.
+
+    A stopped fit's covariance is that of its last iterate, not of an optimum.
     """
     x = np.asarray(x0, dtype=float).copy()
     lo, hi = bounds if bounds is not None else (np.full_like(x, -np.inf), np.full_like(x, np.inf))
@@ -98,9 +112,17 @@ def least_squares_lm(
         callback(history[-1])
     message, success, it = "maximum iterations reached", False, 0
     for it in range(1, max_iterations + 1):
-        x_new, cost_new, lam, tries = _trial_step(fun, x, r, J, cost, lam, damped, lo, hi)
+        # every trial and the Jacobian at the accepted one within the allowance
+        left = _TRIALS if max_evaluations is None else min(_TRIALS, max_evaluations - nfev - 1)
+        if left < 1:
+            message, it = OUT_OF_EVALUATIONS, it - 1
+            break
+        x_new, cost_new, lam, tries = _trial_step(fun, x, r, J, cost, lam, damped, lo, hi, left)
         nfev += tries
         if x_new is None:
+            if tries < _TRIALS:
+                message, it = OUT_OF_EVALUATIONS, it - 1
+                break
             message, success = "no step reduces the cost (at a minimum within tolerance)", True
             break
         step_norm = float(np.linalg.norm(x_new - x))
@@ -117,23 +139,36 @@ def least_squares_lm(
         )
         if callback:
             callback(history[-1])
+        reason = stop(history, r) if stop else None
+        if reason is not None:
+            message = reason
+            break
         if rel_dec < ftol and step_norm < xtol * (np.linalg.norm(x) + xtol):
             message, success = "converged (cost and step below tolerance)", True
             break
         if rel_dec < ftol:
             message, success = "converged (relative cost decrease below ftol)", True
             break
-    JTJ = J.T @ J
-    try:
-        cov = np.linalg.inv(JTJ)
-    except np.linalg.LinAlgError:
-        cov = np.linalg.pinv(JTJ)
+    cov = _covariance(J)
     return LeastSquaresResult(x, cost, r, J, cov, nfev, njev, it, success, message, history)
 
 
-def _trial_step(fun, x, r, J, cost, lam, damped, lo, hi):
-    """Up to 12 trials of a step from ``x`` until one lowers the cost: the damping raised
-    5-fold after each failure (LM), or the Gauss-Newton step halved (undamped).
+def _covariance(J: np.ndarray) -> np.ndarray:
+    """``(J^T J)^-1``, the pseudo-inverse where it is singular."""
+    JTJ = J.T @ J
+    try:
+        return np.linalg.inv(JTJ)
+    except np.linalg.LinAlgError:
+        return np.linalg.pinv(JTJ)
+
+
+#: Trials of a step before the fit gives up (it is at a minimum within tolerance).
+_TRIALS = 12
+
+
+def _trial_step(fun, x, r, J, cost, lam, damped, lo, hi, trials: int = _TRIALS):
+    """Up to ``trials`` trials of a step from ``x`` until one lowers the cost: the damping
+    raised 5-fold after each failure (LM), or the Gauss-Newton step halved (undamped).
 
     Returns ``(x_new, cost_new, lam, evaluations)``; ``x_new`` None when no trial lowered it.
     """
@@ -142,7 +177,7 @@ def _trial_step(fun, x, r, J, cost, lam, damped, lo, hi):
     d = np.diag(A).copy()
     d[d <= 0] = 1.0
     factor, step = 1.0, None
-    for tries in range(1, 13):
+    for tries in range(1, trials + 1):
         if damped or step is None:
             M = A + lam * np.diag(d)
             try:
@@ -158,4 +193,4 @@ def _trial_step(fun, x, r, J, cost, lam, damped, lo, hi):
             lam = max(lam * 5.0, 1e-6)
         else:
             factor *= 0.5  # undamped: the Gauss-Newton direction, shortened
-    return None, np.inf, lam, 12
+    return None, np.inf, lam, trials

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from analysis.calibration.lhs import Distribution, latin_hypercube
-from analysis.calibration.lm import LeastSquaresResult, least_squares_lm
+from analysis.calibration.lm import OUT_OF_EVALUATIONS, LeastSquaresResult, least_squares_lm
 from analysis.calibration.modal_damping import ZETA, DampedPredictor, damped_space
 from analysis.calibration.objective import FRFObjective
 from analysis.events import Listener, UnitDone, iterations
@@ -165,9 +165,10 @@ def _reweight(obj: FRFObjective, sigma: np.ndarray) -> None:
 
 
 #: Why a fit stopped before Levenberg-Marquardt's own criteria (its result's ``message``).
-OUT_OF_WORK = "stopped: the evaluations allowed are used"
+OUT_OF_WORK = OUT_OF_EVALUATIONS
 NO_BETTER = "stopped: no better than the bar it was given"
 REWEIGH = "reweighted"
+STOPPED = (OUT_OF_WORK, NO_BETTER, REWEIGH)
 
 #: An iteration that lowers the metric by less than this share has stalled.
 STALL = 0.05
@@ -182,8 +183,6 @@ class StopRule:
 
     Parameters
     ----------
-    max_evaluations : int, optional
-        Evaluations of the objective after which the fit stops (:class:`FitLimits`).
     give_up_chi2 : float, optional
         The chi-square per degree of freedom a fit that is no longer falling fast must get
         below (``refit``'s ``give_up_chi2``).
@@ -192,23 +191,16 @@ class StopRule:
         metric (``refit``'s ``reweight_drop``).
     """
 
-    max_evaluations: int | None = None
     give_up_chi2: float | None = None
     reweigh_drop: float | None = None
 
-    def out_of_work(self, evaluations: int) -> bool:
-        return self.max_evaluations is not None and evaluations >= self.max_evaluations
-
-    def check(self, seen: Sequence[Mapping], dof: int, evaluations: int = 0) -> str | None:
+    def check(self, seen: Sequence[Mapping], dof: int) -> str | None:
         """Why the fit stops after the last of its iterations ``seen`` (Levenberg-Marquardt's
-        history entries, with ``iteration`` and ``cost``; ``dof`` its degrees of freedom;
-        ``evaluations`` of the objective so far), or None to go on. Never at the start
-        point."""
+        history entries, with ``iteration`` and ``cost``; ``dof`` its degrees of freedom), or
+        None to go on. Never at the start point."""
         h = seen[-1]
         if h["iteration"] < 1:
             return None
-        if self.out_of_work(evaluations):
-            return OUT_OF_WORK
         stalled = h["cost"] > (1 - STALL) * seen[-2]["cost"]
         if (
             self.reweigh_drop is not None
@@ -225,82 +217,27 @@ class StopRule:
         return None
 
 
-class _Stop(Exception):
-    """A :class:`StopRule`'s reason, carried out of :func:`least_squares_lm` (which takes no
-    stop criterion) and caught in :func:`_lm_until` only."""
-
-    def __init__(self, reason: str) -> None:
-        super().__init__(reason)
-        self.reason = reason
-
-
-class _Remember:
-    """The objective, remembering its residuals at the last point with a Jacobian (the
-    iterate Levenberg-Marquardt accepted last), and stopping the fit before an evaluation past
-    the rule's allowance (a trial step rejected again and again spends evaluations without an
-    iteration)."""
-
-    def __init__(self, obj: FRFObjective, rule: StopRule = StopRule()) -> None:
-        self.obj, self.x, self.r, self.rule = obj, None, None, rule
-        self.calls = 0  # evaluations, with or without the Jacobian
-
-    def __call__(self, x, want_jac):
-        if self.x is not None and self.rule.out_of_work(self.calls):
-            raise _Stop(OUT_OF_WORK)
-        self.calls += 1
-        r, J = self.obj(x, want_jac)
-        if want_jac:
-            self.x, self.r = np.array(x, float), r
-        return r, J
-
-
 def _lm_until(
     obj: FRFObjective, theta, rule: StopRule, limits: FitLimits, progress: Listener | None
 ) -> LeastSquaresResult:
-    """Bounded Levenberg-Marquardt from ``theta`` until its own criteria or ``rule`` stop it;
-    the result's ``message`` says which (a stopped fit's is one of :data:`OUT_OF_WORK`,
-    :data:`NO_BETTER`, :data:`REWEIGH`)."""
-    space = obj.space
-    fun = _Remember(obj, rule)
-    seen: list[dict] = []
-    tell = iterations(LM_STAGE, progress)
-
-    def watch(h: dict) -> None:
-        seen.append(h)
-        if tell:
-            tell(h)
-        reason = rule.check(seen, max(fun.r.size - space.size, 1), fun.calls)
-        if reason is not None:
-            raise _Stop(reason)
-
-    try:
-        return least_squares_lm(
-            fun,
-            theta,
-            bounds=space.theta_bounds(),
-            max_iterations=limits.max_iterations,
-            ftol=limits.ftol,
-            callback=watch,
-        )
-    except _Stop as stop:
-        return _stopped(fun, seen, stop.reason)
-
-
-def _stopped(fun: _Remember, seen: list[dict], message: str) -> LeastSquaresResult:
-    """The result at the last accepted iterate of a stopped fit (no covariance: a stopped
-    fit's means nothing, and a Jacobian costs a full sensitivity solve)."""
-    x = np.array(seen[-1]["x"])
-    if fun.x is not None and np.array_equal(fun.x, x):
-        r = fun.r
-    else:
-        fun.calls += 1
-        r = fun.obj(x, False)[0]
-    cov = np.full((x.size, x.size), np.nan)
-    it = seen[-1]["iteration"]
-    # nfev counts every evaluation, as least_squares_lm's does; njev is not tracked here
-    return LeastSquaresResult(
-        x, 0.5 * float(r @ r), r, None, cov, fun.calls, 0, it, False, message, list(seen)
+    """Bounded Levenberg-Marquardt from ``theta`` until its own criteria, its allowance of
+    evaluations or ``rule`` stop it; the result's ``message`` says which (a stopped fit's is
+    one of :data:`OUT_OF_WORK`, :data:`NO_BETTER`, :data:`REWEIGH`), and a stopped fit has no
+    covariance (a Jacobian away from an optimum says nothing of the parameters' errors)."""
+    n = obj.space.size
+    res = least_squares_lm(
+        obj,
+        theta,
+        bounds=obj.space.theta_bounds(),
+        max_iterations=limits.max_iterations,
+        ftol=limits.ftol,
+        callback=iterations(LM_STAGE, progress),
+        max_evaluations=limits.max_evaluations,
+        stop=lambda seen, r: rule.check(seen, max(r.size - n, 1)),
     )
+    if res.message in STOPPED:
+        res.cov = np.full((n, n), np.nan)
+    return res
 
 
 def _current(model: Model, name: str) -> float:
@@ -386,7 +323,7 @@ def refit(
     whole = good.size == rows.size
     costs, n_start_evaluations = _start_costs(obj, thetas, p0, base if whole else None, progress)
     drop = limits.reweight_drop if starts.n_lm == 1 else None
-    rule = StopRule(limits.max_evaluations, limits.give_up_chi2, drop)
+    rule = StopRule(limits.give_up_chi2, drop)
     best, reweigh, n_lm_evaluations = _lm_from_starts(
         obj, thetas, costs, starts.n_lm, rule, limits, progress
     )
@@ -494,7 +431,7 @@ def _lm_from_starts(
     best: LeastSquaresResult | None = None
     reweigh = False
     evaluations = 0
-    cap = rule.max_evaluations
+    cap = limits.max_evaluations
     for k in np.argsort(costs)[:n_lm_starts]:
         if len(thetas) > 1 and not np.isfinite(costs[k]):
             continue
@@ -502,7 +439,7 @@ def _lm_from_starts(
             break
         left = None if cap is None else cap - evaluations
         res = _lm_until(
-            obj, thetas[k], dataclasses.replace(rule, max_evaluations=left), limits, progress
+            obj, thetas[k], rule, dataclasses.replace(limits, max_evaluations=left), progress
         )
         reweigh = reweigh or res.message == REWEIGH
         evaluations += res.nfev

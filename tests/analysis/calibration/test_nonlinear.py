@@ -135,6 +135,34 @@ def test_lm_matches_scipy_on_a_smooth_problem():
     assert np.allclose(gn.x, [2.5, 1.3, 0.3], rtol=1e-6)
 
 
+def test_lm_stops_at_its_evaluations_or_when_asked():
+    """``max_evaluations`` counts every evaluation, the start's included, and stops before one
+    past it at the last accepted iterate; ``stop`` ends the fit at the iterate it names, with
+    its message."""
+    from analysis.calibration.lm import OUT_OF_EVALUATIONS
+
+    calls = []
+
+    def fun(x, want):  # Rosenbrock: many iterations from (-1.2, 1)
+        calls.append(want)
+        r = np.array([10 * (x[1] - x[0] ** 2), 1 - x[0]])
+        return r, (np.array([[-20 * x[0], 10.0], [-1.0, 0.0]]) if want else None)
+
+    x0 = np.array([-1.2, 1.0])
+    free = least_squares_lm(fun, x0, max_iterations=200, ftol=1e-15)
+    assert free.success and free.nfev == len(calls) > 8
+    for cap in (1, 2, 5, 8):
+        calls.clear()
+        res = least_squares_lm(fun, x0, max_iterations=200, ftol=1e-15, max_evaluations=cap)
+        assert res.message == OUT_OF_EVALUATIONS and not res.success
+        assert res.nfev == len(calls) <= cap
+        assert np.array_equal(res.x, res.history[-1]["x"]) and res.nit == len(res.history) - 1
+    asked = least_squares_lm(
+        fun, x0, max_iterations=200, stop=lambda h, r: "enough" if h[-1]["iteration"] == 3 else None
+    )
+    assert asked.message == "enough" and asked.nit == 3 and not asked.success
+
+
 def test_latin_hypercube_follows_the_papers_distributions():
     d = paper_distributions(1e-3)
     s = latin_hypercube(d, 2000, seed=4, names=["k_c", "gap", "v_c"])
