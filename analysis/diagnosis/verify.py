@@ -165,7 +165,8 @@ class Verified:
 
     @property
     def stopped(self) -> bool:
-        """The recalibration ran out of its time before it converged."""
+        """The recalibration was stopped (its allowance used, or no better than the bar) before
+        it converged."""
         return self.message.startswith("stopped")
 
     def chi2_per_dof(self, rows: np.ndarray | None = None) -> float:
