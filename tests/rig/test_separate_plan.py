@@ -113,7 +113,7 @@ def test_the_separating_level_is_one_the_simulated_rig_can_drive(tmp_path) -> No
     assert rec["excluded"][0]["current_a"] > 0.8 * setup.amplifier.current_limit_a
     plan = load_plan(write_separating_plan(tmp_path / "separate.toml", rec, data))
     out = tmp_path / "separate.h5"
-    options = {"truth": "damper_p4", "seed": 3}
+    options = {"truth": "damper_p4", "seed": 3, "sensor_masses_kg": setup.sensor_masses_kg()}
     with open_rig("sim", setup, backend_options=options, lock_dir=tmp_path / "locks") as rig:
         TestRun(rig.backend, plan, setup, out, amplifier=rig.amplifier).execute()
     run = read_measurement(out)
@@ -132,7 +132,7 @@ def test_a_level_the_amplifier_cannot_give_stops_with_its_cause_and_keeps_the_st
     rec["best"]["step_hz"] = 1.0
     plan = load_plan(write_separating_plan(tmp_path / "too-high.toml", rec, _data()))
     out = tmp_path / "too-high.h5"
-    options = {"truth": "damper_p4", "seed": 3}
+    options = {"truth": "damper_p4", "seed": 3, "sensor_masses_kg": setup.sensor_masses_kg()}
     with open_rig("sim", setup, backend_options=options, lock_dir=tmp_path / "locks") as rig:
         TestRun(rig.backend, plan, setup, out, amplifier=rig.amplifier).execute()
     run = read_measurement(out)
