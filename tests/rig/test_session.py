@@ -7,7 +7,7 @@ import numpy as np
 
 from analysis.measurement_file import read_measurement
 from rig.run.events import RunPaused, StepFinished
-from rig.run.session import RunSession
+from rig.run.session import RunSession, previous_rig
 from tests.rig.rig_helpers import reduced_plan, setup_at, sim_daq
 
 PLAN = reduced_plan(levels_n=(2.0,), ranges=((21.0, 22.0, 1.0),))
@@ -74,8 +74,6 @@ def test_resume_continues_the_file_with_its_stored_plan(tmp_path):
 
 
 def test_the_rig_a_file_was_made_on_is_read_from_its_config() -> None:
-    from rig.run.session import previous_rig
-
     sim = {"run": {"backend": "sim", "backend_options": {"truth": "damper_p4", "seed": 3}}}
     assert previous_rig(sim) == ("sim", {"truth": "damper_p4", "seed": 3})
     # only what the file records, with the right types: a seed of True is no seed
