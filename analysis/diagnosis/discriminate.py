@@ -6,7 +6,11 @@ each of the paper's frequency ranges, outputs at every measurement point) and th
 *discriminating power* of a (sensor, level, range) is the RMS over its steps and orders of
 ``|Y_a - Y_b| / sigma`` for the pair of candidates it separates worst, ``sigma`` the planning
 noise model's standard error of each phasor (:func:`analysis.planning.information.phasor_sigma`).
-The best configuration is the one a test should add.
+The best configuration is the one a test should add, among those the rig's drive can run: where
+the file's lab setup gives the shaker's armature mass and force constant and the amplifier's
+current limit (:class:`analysis.planning.drive_current.ShakerDrive`), a (level, range) whose
+predicted coil current exceeds the usable share of the limit for any tied candidate is left out
+(it would trip the amplifier at the drive point's resonance).
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import numpy as np
 from analysis.measurement_file import SteppedSineData
 from analysis.model import Model
 from analysis.planning.candidates import PAPER_RANGES, FrequencyRange, NoiseModel
+from analysis.planning.drive_current import ShakerDrive
 from analysis.planning.information import phasor_sigma
 from analysis.planning.sweeps import SweepJob, run_sweep
 
@@ -34,6 +39,7 @@ def discriminate(
     ranges: Sequence[FrequencyRange] = PAPER_RANGES,
     noise: NoiseModel | None = None,
     n_best: int = 5,
+    drive: ShakerDrive | None = None,
 ) -> dict:
     """Discriminating power of every (sensor, level, range) for a group of tied candidates.
 
@@ -49,20 +55,38 @@ def discriminate(
         Candidate frequency ranges (default: the paper's seven 20 Hz ranges).
     noise : NoiseModel, optional
         Default: the planning default (2 % and 0.01 m/s^2).
+    drive : ShakerDrive, optional
+        The shaker and amplifier (default: from the file's lab setup; none there, the current
+        is not checked).
 
     Returns
     -------
     dict
-        ``best`` (sensor, level_n, range, power), ``table`` (the ``n_best`` best) and ``text``.
+        ``best`` (sensor, level_n, range, power, current_a: the predicted peak coil current,
+        None when unknown), ``table`` (the ``n_best`` best), ``text`` and ``excluded`` (the
+        levels and ranges left out for the current, with it).
+
+    Raises
+    ------
+    RuntimeError
+        When no configuration converged for every candidate, or every one needs more current
+        than the amplifier gives.
     """
     if len(group) < 2:
         raise ValueError("discrimination needs at least two tied candidates")
     noise = noise or NoiseModel()
     levels = list(levels_n) if levels_n is not None else sorted(float(x) for x in data.levels_n)
     ratio = data.force_targets[0] / data.force_targets[0][0]
-    models = [Model.from_toml_text(g.verified.model_toml, "<tied candidate>") for g in group]
+    masses = _sensor_masses(data)
+    models = []
+    for g in group:
+        model = Model.from_toml_text(g.verified.model_toml, "<tied candidate>")
+        # the rig runs the test with the file's sensors on, and their masses move the modes
+        # (2.5 Hz at the beam's second bending mode), as the comparison's prediction has them
+        models.append(model.add_masses(masses) if masses else model)
     sensors = tuple(sorted(models[0].points))
     act = data.actuator.point
+    drive = drive if drive is not None else ShakerDrive.from_setup(getattr(data, "setup", None))
     outputs = {}
     for m_i, model in enumerate(models):
         text = model.to_toml()
@@ -81,22 +105,15 @@ def discriminate(
                 )
                 outputs[m_i, li, ri] = run_sweep(job)
     rows: list[dict[str, Any]] = []
+    excluded: list[dict[str, Any]] = []
     for li, lv in enumerate(levels):
         for ri, rg in enumerate(ranges):
-            worst = None
-            for a, b in itertools.combinations(range(len(models)), 2):
-                sa, sb = outputs[a, li, ri], outputs[b, li, ri]
-                f = np.intersect1d(sa.frequency_hz, sb.frequency_hz)
-                if f.size == 0:
-                    continue
-                ia, ib = np.isin(sa.frequency_hz, f), np.isin(sb.frequency_hz, f)
-                sig = phasor_sigma(sa, sensors, noise)[ia]
-                d = np.abs(sa.outputs[ia] - sb.outputs[ib]) / sig  # (n, K, S)
-                with np.errstate(invalid="ignore"):
-                    power = np.sqrt(
-                        np.nanmean(np.where(np.isfinite(d), d, np.nan) ** 2, axis=(0, 1))
-                    )
-                worst = power if worst is None else np.minimum(worst, power)
+            sweeps = [outputs[m, li, ri] for m in range(len(models))]
+            current = _peak_current(drive, sweeps, sensors.index(act))
+            if drive is not None and current is not None and current > drive.usable_current_a:
+                excluded.append({"level_n": float(lv), "range": rg.label, "current_a": current})
+                continue
+            worst = _worst_pair_power(sweeps, sensors, noise)
             if worst is None:
                 continue
             for si, s in enumerate(sensors):
@@ -109,12 +126,48 @@ def discriminate(
                         "stop_hz": float(rg.stop_hz),
                         "step_hz": float(rg.step_hz),
                         "power": float(worst[si]),
+                        "current_a": current,
                     }
                 )
     rows.sort(key=lambda r: -r["power"] if np.isfinite(r["power"]) else np.inf)
+    if not rows and excluded and drive is not None:
+        least = min(excluded, key=lambda e: e["current_a"])
+        raise RuntimeError(
+            f"every level and range needs more coil current than the amplifier gives: the least, "
+            f"{least['level_n']:g} N in {least['range']} Hz, needs {least['current_a']:.3g} A "
+            f"against {drive.usable_current_a:.3g} A usable (of its {drive.current_limit_a:g} A "
+            "limit); give lower levels"
+        )
     if not rows:
         raise RuntimeError("no configuration converged for every tied candidate")
     best = rows[0]
+    return {
+        "best": best,
+        "table": rows[:n_best],
+        "text": _text(best, data, drive, excluded),
+        "candidates": [g.candidate.label for g in group],
+        "excluded": excluded,
+    }
+
+
+def _worst_pair_power(sweeps: Sequence, sensors: tuple[int, ...], noise: NoiseModel):
+    """Per sensor, the discriminating power of the pair of candidates it separates worst
+    (None when no pair has a common converged step)."""
+    worst = None
+    for sa, sb in itertools.combinations(sweeps, 2):
+        f = np.intersect1d(sa.frequency_hz, sb.frequency_hz)
+        if f.size == 0:
+            continue
+        ia, ib = np.isin(sa.frequency_hz, f), np.isin(sb.frequency_hz, f)
+        sig = phasor_sigma(sa, sensors, noise)[ia]
+        d = np.abs(sa.outputs[ia] - sb.outputs[ib]) / sig  # (n, K, S)
+        with np.errstate(invalid="ignore"):
+            power = np.sqrt(np.nanmean(np.where(np.isfinite(d), d, np.nan) ** 2, axis=(0, 1)))
+        worst = power if worst is None else np.minimum(worst, power)
+    return worst
+
+
+def _text(best: dict, data: SteppedSineData, drive: ShakerDrive | None, excluded: list) -> str:
     measured = {ch.point for ch in data.channels}
     text = (
         f"add a sensor at point {best['sensor']}"
@@ -124,9 +177,36 @@ def discriminate(
         f" at {best['level_n']:g} N in {best['range']} Hz: the tied candidates' predictions "
         f"differ there by {best['power']:.3g} standard errors (RMS, worst pair)"
     )
-    return {
-        "best": best,
-        "table": rows[:n_best],
-        "text": text,
-        "candidates": [g.candidate.label for g in group],
-    }
+    if drive is not None:
+        text += (
+            f"; the shaker needs up to {best['current_a']:.2g} A of the amplifier's "
+            f"{drive.current_limit_a:g} A"
+        )
+        if excluded:
+            text += f" ({len(excluded)} level(s) and range(s) needing more left out)"
+    return text
+
+
+def _sensor_masses(data: SteppedSineData) -> dict[int, float]:
+    """The mass each of the file's sensors adds at its point [kg] (as the comparison's)."""
+    masses: dict[int, float] = {}
+    for ch in data.channels:
+        m = float(getattr(ch, "mass_kg", 0.0))
+        if m > 0:
+            masses[int(ch.point)] = masses.get(int(ch.point), 0.0) + m
+    return masses
+
+
+def _peak_current(drive: ShakerDrive | None, sweeps: Sequence, column: int) -> float | None:
+    """The largest peak coil current any candidate's sweep needs [A] (None without a drive);
+    ``column`` is the drive point's among the sweeps' outputs."""
+    if drive is None:
+        return None
+    peak = 0.0
+    for sw in sweeps:
+        if sw.frequency_hz.size == 0:
+            continue
+        omega = 2 * np.pi * sw.frequency_hz[:, None] * sw.order_values[None, :]
+        x = sw.outputs[:, :, column]
+        peak = max(peak, float(drive.peak_current_a(sw.force, x, omega).max()))
+    return peak

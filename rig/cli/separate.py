@@ -20,13 +20,14 @@ from rig.cli.run import EXIT_OK, _add_rig_options, _run
 
 def _previous_sim_options(run_config: Any, args) -> None:
     """Take the simulated rig's truth and seed from the first run when not given."""
-    before = run_config.get("run", {}) if isinstance(run_config, dict) else {}
-    if args.backend != "sim" or before.get("backend") != "sim":
+    from rig.run.session import previous_rig
+
+    backend, previous = previous_rig(run_config)
+    if args.backend != "sim" or backend != "sim":
         return
-    previous = before.get("backend_options", {})
-    if args.truth is None and isinstance(previous.get("truth"), str):
+    if args.truth is None and "truth" in previous:
         args.truth = previous["truth"]
-    if args.seed is None and isinstance(previous.get("seed"), int):
+    if args.seed is None and "seed" in previous:
         args.seed = previous["seed"]
 
 

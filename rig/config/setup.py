@@ -236,6 +236,16 @@ class DriveSetup:
         "place the mean response of a structure with a one-sided contact.",
         0.0,
     )
+    armature_mass_kg: NonNegative = _doc(
+        "Moving mass of the shaker's armature and coil [kg] (0: unknown). With the force "
+        "constant it gives the coil current a force and a drive-point acceleration need, "
+        "(F + m a) / Bl: near a resonance of the drive point the armature's inertia, not the "
+        "force, sets the current.",
+        0.0,
+    )
+    force_constant_n_per_a: NonNegative = _doc(
+        "Force constant Bl of the shaker's coil [N/A] (0: unknown).", 0.0
+    )
 
 
 @settings()
@@ -253,6 +263,11 @@ class AmplifierSetup:
     model: Text = _doc("Amplifier model, for the record.", "")
     serial: Text = _doc("Amplifier serial number, for the record.", "")
     timeout_s: Positive = _doc("Reply timeout of the serial interface [s].", 1.0)
+    current_limit_a: NonNegative = _doc(
+        "Peak output current at which the amplifier's overload protection switches the output "
+        "off [A] (0: unknown).",
+        0.0,
+    )
 
 
 @settings(kw_only=True)

@@ -45,7 +45,7 @@ class LabWindow(QtWidgets.QMainWindow):
         self.setWindowTitle("clearance-rig lab")
         self.acquisition = AcquisitionPanel(controller or LocalRunController())
         self.browser = RunBrowser()
-        self.workbench = WorkbenchPanel()
+        self.workbench = WorkbenchPanel(self.acquisition.controller)
         self.tabs = QtWidgets.QTabWidget()
         self.tabs.addTab(self.acquisition, "Acquisition")
         self.tabs.addTab(self.browser, "Run browser")

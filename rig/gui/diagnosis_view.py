@@ -7,7 +7,9 @@ they are (their own summaries, numbers and words); nothing is recomputed here.
 
 from __future__ import annotations
 
+import html
 import math
+from pathlib import Path
 
 import numpy as np
 import pyqtgraph as pg
@@ -66,6 +68,10 @@ class DiagnosisView(QtWidgets.QWidget):
         sh.setStretchLastSection(True)
         self.recommendation = QtWidgets.QLabel("")
         self.recommendation.setWordWrap(True)
+        self.separation = QtWidgets.QLabel("")
+        self.separation.setWordWrap(True)
+        self.separation.setTextFormat(QtCore.Qt.TextFormat.RichText)
+        self.separation.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
         self.error = make_plot(
             "recalibration: error by iteration",
             "iteration",
@@ -80,6 +86,7 @@ class DiagnosisView(QtWidgets.QWidget):
 
         left = QtWidgets.QVBoxLayout()
         left.addWidget(self.verdict)
+        left.addWidget(self.separation)  # the tie's answer beside the verdict it settles
         left.addWidget(heading("Evidence in the data"))
         left.addWidget(self.evidence, 3)
         left.addWidget(heading("Verified candidates (everything recalibrated), best first"))
@@ -132,6 +139,39 @@ class DiagnosisView(QtWidgets.QWidget):
         self.recommendation.setText(
             f"To separate the tied candidates: {rec['text']}" if rec else ""
         )
+        self._separation_text("", "")
+
+    # -- the separating test ---------------------------------------------------------------
+    def show_separation_note(self, text: str, plan=None) -> None:
+        """A word on the separating test (under way, or why it cannot run here) and the plan
+        file written for it."""
+        lines = [text] if plan is None else [text, f"plan: {plan}"]
+        self._separation_text("<br>".join(html.escape(line) for line in lines), "")
+
+    def show_separation(self, sep, path) -> None:
+        """Show an :class:`analysis.diagnosis.separate.Separation`: which candidate the
+        separating run puts first alone, or which remain tied."""
+        if sep.resolved:
+            head = (
+                f"{status_chip('RESOLVED', OK)} &nbsp; the separating run puts "
+                f"<b>{html.escape(sep.tied[0])}</b> first alone"
+            )
+        else:
+            head = (
+                f"{status_chip('STILL TIED', WARN)} &nbsp; within {sep.tie_chi2:g} on the "
+                f"separating run: <b>{html.escape('; '.join(sep.tied))}</b>"
+            )
+        rows = "<br>".join(
+            f"{html.escape(r['label'])}: residual {r['rms_over_noise']:.3g} x noise, "
+            f"Δχ² {r['delta_chi2']:.1f}"
+            for r in sep.ranking
+        )
+        name = html.escape(Path(path).name)
+        self._separation_text(f"{head}<br>separating run {name}:<br>{rows}", str(path))
+
+    def _separation_text(self, text: str, tip: str) -> None:
+        self.separation.setText(text)
+        self.separation.setToolTip(tip)
 
     def _show_ranking(self, d) -> None:
         self.ranking.setRowCount(len(d.ranking))

@@ -4,8 +4,11 @@ Load a stepped-sine run and a model file (or the reference rig, or the model of 
 result); *Compare* shows measured against model FRFs and the residual maps; *Diagnose* runs
 :func:`analysis.diagnosis.diagnose` in a worker thread with its progress and shows the verdict,
 the evidence and the ranked candidates; *Add effect and recalibrate* runs
-:func:`analysis.diagnosis.augment` on the selected candidate with the error falling live. The
-Calibration and Planning tabs show calibration result files and pretest plans. Everything is
+:func:`analysis.diagnosis.augment` on the selected candidate with the error falling live; on a
+tie, *Run the separating test* writes the measurement that separates the tied candidates as a
+plan, runs it on the simulated rig the opened run was made on (:func:`rig.run.session.open_rig`
+and :class:`rig.run.session.TestRun`, as ``rig run`` does) and ranks them again on the new file.
+The Calibration and Planning tabs show calibration result files and pretest plans. Everything is
 computed by the analysis package's public API; this module only arranges it.
 """
 
@@ -24,7 +27,7 @@ from analysis.diagnosis import (
     compare,
     diagnose,
 )
-from analysis.events import Event, Iteration, StageDone, UnitDone
+from analysis.events import Event, EventBus, Iteration, Listener, StageDone, UnitDone
 from analysis.measurement_file import MeasurementFileError, SteppedSineData, read_measurement
 from analysis.model import load_model
 from rig.gui.comparison_view import ComparisonView
@@ -32,6 +35,7 @@ from rig.gui.diagnosis_options import DiagnosisOptions
 from rig.gui.diagnosis_view import DiagnosisView
 from rig.gui.planning_view import CalibrationView, PlanningView
 from rig.gui.residual_view import ResidualView
+from rig.gui.run_setup import runs_folder
 from rig.gui.style import ALARM
 from rig.gui.tasks import Task
 
@@ -70,13 +74,22 @@ class WorkbenchPanel(QtWidgets.QWidget):
     -------
     task_finished(str, bool)
         A background task (``"compare"``, ``"diagnosis"``, ``"recalibration"``,
-        ``"planning"``) ended, successfully or not.
+        ``"planning"``, ``"separating test"``) ended, successfully or not.
+
+    Parameters
+    ----------
+    controller : RunController, optional
+        Where the window runs tests (:mod:`rig.gui.controller`): the separating test runs in
+        this process only, so with the acquisition service it is written and not run; its
+        ``lock_dir`` is used for the simulated rig's lock. None: this process, default locks.
     """
 
     task_finished = QtCore.Signal(str, bool)
 
-    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+    def __init__(self, controller=None, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
+        self.controller = controller
+        self.separation = None
         self.data: SteppedSineData | None = None
         self.model: Any = None
         self.model_label = ""
@@ -101,6 +114,11 @@ class WorkbenchPanel(QtWidgets.QWidget):
             "add the candidate selected in the ranking to the model and recalibrate everything"
         )
         self.save_button = QtWidgets.QPushButton("Save augmented model…")
+        self.separate_button = QtWidgets.QPushButton("Run the separating test")
+        self.separate_button.setToolTip(
+            "on a tie: run the measurement that separates the tied candidates on the simulated "
+            "rig the run was made on, then rank them again on the new file"
+        )
         self.stage = QtWidgets.QLabel("")
         self.progress = QtWidgets.QProgressBar()
         self.progress.setMaximumWidth(260)
@@ -136,6 +154,7 @@ class WorkbenchPanel(QtWidgets.QWidget):
         self.diagnose_button.clicked.connect(self.diagnose)
         self.augment_button.clicked.connect(self.augment_selected)
         self.save_button.clicked.connect(self._save_dialog)
+        self.separate_button.clicked.connect(self.run_separating_test)
         self.calibration_view.open_button.clicked.connect(self._open_calibration_dialog)
         self.calibration_view.use_button.clicked.connect(self.use_calibrated_model)
         self.planning_view.run_button.clicked.connect(self.run_planning)
@@ -148,7 +167,13 @@ class WorkbenchPanel(QtWidgets.QWidget):
         inputs.addWidget(self.model_row)
         inputs.addWidget(self.linear_row)
         actions = QtWidgets.QHBoxLayout()
-        for b in (self.compare_button, self.diagnose_button, self.augment_button, self.save_button):
+        for b in (
+            self.compare_button,
+            self.diagnose_button,
+            self.augment_button,
+            self.separate_button,
+            self.save_button,
+        ):
             actions.addWidget(b)
         actions.addWidget(self.progress)
         actions.addWidget(self.stage, 1)
@@ -241,6 +266,7 @@ class WorkbenchPanel(QtWidgets.QWidget):
 
     def _reset_results(self) -> None:
         self.comparison = self.before = self.diagnosis = self.augmented = None
+        self.separation = None
         self._buttons()
 
     def _buttons(self) -> None:
@@ -250,6 +276,9 @@ class WorkbenchPanel(QtWidgets.QWidget):
         self.diagnose_button.setEnabled(ready)
         ranked = self.diagnosis is not None and bool(self.diagnosis.ranking)
         self.augment_button.setEnabled(ready and ranked)
+        d = self.diagnosis
+        tied = d is not None and len(d.group) > 1 and bool(d.recommendation)
+        self.separate_button.setEnabled(ready and tied)
         self.save_button.setEnabled(idle and self.augmented is not None)
         self.planning_view.run_button.setEnabled(idle)
 
@@ -365,7 +394,7 @@ class WorkbenchPanel(QtWidgets.QWidget):
         return self._start("diagnosis", work, self._diagnosed)
 
     def _diagnosed(self, d) -> None:
-        self.diagnosis = d
+        self.diagnosis, self.separation = d, None
         self.comparison, self.before, self.augmented = d.comparison, None, None
         self.diagnosis_view.show_diagnosis(d)
         self._show_comparison(self.model_label)
@@ -426,6 +455,75 @@ class WorkbenchPanel(QtWidgets.QWidget):
             except (OSError, ValueError) as exc:
                 self._say(str(exc), error=True)
 
+    # -- the separating test ---------------------------------------------------------------
+    def _needs_the_rig(self, data: SteppedSineData) -> str:
+        """Why the separating test cannot run here ("" when it can)."""
+        from rig.gui.controller import LocalRunController
+        from rig.run.session import previous_rig
+
+        c = self.controller
+        if c is not None and not isinstance(c, LocalRunController):
+            return (
+                f"this window runs tests on {c.description}: the separating test needs the rig "
+                "there; run the plan from the Acquisition tab"
+            )
+        backend, options = previous_rig(data.config)
+        if backend != "sim":
+            made = f"on the {backend!r} backend" if backend else "on a rig the file does not name"
+            return (
+                f"{data.path.name} was made {made}, not on the simulated rig: the separating "
+                "test needs the rig; run the plan from the Acquisition tab or with rig run"
+            )
+        if "truth" not in options:
+            return f"{data.path.name} does not record its simulated rig's truth structure"
+        return ""
+
+    def run_separating_test(self) -> bool:
+        """On a tie: write the separating plan, run it on the opened run's simulated rig (in a
+        worker thread) and rank the tied candidates on the new file. Where the test needs the
+        rig (hardware, the acquisition service) the plan is written and the view says so."""
+        from analysis.diagnosis.separate import write_separating_plan
+
+        d, data = self.diagnosis, self.data
+        if d is None or data is None or len(d.group) < 2 or not d.recommendation:
+            return False
+        out = _free_path(runs_folder(), f"{data.path.stem}-separate", ".h5")
+        plan_path = out.with_suffix(".plan.toml")
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            write_separating_plan(plan_path, d.recommendation, data)
+        except (OSError, ValueError) as exc:
+            self._say(f"cannot write the separating plan: {exc}", error=True)
+            return False
+        self.tabs.setCurrentWidget(self.diagnosis_view)
+        why = self._needs_the_rig(data)
+        if why:
+            self.diagnosis_view.show_separation_note(why, plan_path)
+            self._say(f"the separating test needs the rig: plan written to {plan_path}")
+            return False
+        lock_dir = getattr(self.controller, "lock_dir", None)
+        group, tie = list(d.group), d.settings.tie_bic
+
+        def work(report):
+            from analysis.diagnosis.separate import rank_on_separating_run
+
+            path = _separating_run(plan_path, out, data, lock_dir, report)
+            return rank_on_separating_run(group, read_measurement(path), tie), path
+
+        note = f"running the separating test on the simulated rig into {out.name}…"
+        self.diagnosis_view.show_separation_note(note, plan_path)
+        return self._start("separating test", work, self._separated)
+
+    def _separated(self, result) -> None:
+        sep, path = result
+        self.separation = sep
+        self.diagnosis_view.show_separation(sep, path)
+        self.tabs.setCurrentWidget(self.diagnosis_view)
+        if sep.resolved:
+            self._say(f"separating test: {sep.tied[0]} first alone ({Path(path).name})")
+        else:
+            self._say(f"separating test: still tied, {'; '.join(sep.tied)}")
+
     # -- display ---------------------------------------------------------------------------
     def _show_comparison(self, title: str) -> None:
         self.frfs.show_comparison(self.data, self.comparison, self.before, self.model_label)
@@ -476,3 +574,48 @@ class WorkbenchPanel(QtWidgets.QWidget):
     def shutdown(self) -> None:
         if self.task is not None:
             self.task.wait()
+
+
+def _free_path(folder: Path, stem: str, suffix: str) -> Path:
+    """``folder/stem.suffix``, numbered ``-2``, ``-3``... when it or its plan is taken."""
+    path, n = folder / f"{stem}{suffix}", 2
+    while path.exists() or path.with_suffix(".plan.toml").exists():
+        path, n = folder / f"{stem}-{n}{suffix}", n + 1
+    return path
+
+
+def _separating_run(
+    plan_path: Path, out: Path, first: SteppedSineData, lock_dir: Any, report: Listener
+) -> Path:
+    """Run the plan on the simulated rig ``first`` was made on (its truth, seed and lab setup)
+    as ``rig run`` does; each step written is reported. Returns the new file."""
+    from rig.config.plans import load_plan
+    from rig.config.setup import load_setup, setup_from_dict
+    from rig.run.events import StepFinished
+    from rig.run.session import TestRun, open_rig, previous_rig
+
+    plan = load_plan(plan_path)
+    # the bench the first run was made on (its sensors, sample rate), else the plan's own
+    setup = setup_from_dict(first.setup, str(first.path)) if first.setup else load_setup(plan.setup)
+    _, previous = previous_rig(first.config)
+    options = {**previous, "sensor_masses_kg": setup.sensor_masses_kg()}
+    info = {"backend": "sim", "backend_options": previous, "client": "rig gui"}
+    bus = EventBus()
+
+    def step(e: Event) -> None:
+        if isinstance(e, StepFinished):
+            hz = f"{e.record.frequency_hz:.4g} Hz"
+            report(UnitDone("separating run", e.n_done, e.n_steps, hz))
+
+    bus.subscribe(step, kinds=(StepFinished,))
+    with open_rig("sim", setup, backend_options=options, lock_dir=lock_dir) as rig:
+        run = TestRun(
+            rig.backend, plan, setup, out, bus=bus, amplifier=rig.amplifier, run_info=info
+        )
+        summary = run.execute()
+    if summary.status != "success":
+        raise RuntimeError(
+            f"the separating run ended {summary.status}: {summary.message} "
+            f"({summary.n_done} of {summary.n_planned} steps kept in {out})"
+        )
+    return out

@@ -37,6 +37,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from analysis.planning.drive_current import ShakerDrive
 from rig.backends.protocol import BackendError, DaqBackend, ReadTimeoutError
 from rig.config.plans import Limits
 from rig.run.acquisition import (
@@ -333,7 +334,8 @@ class RunEngine:
     def _start(self) -> RunContext:
         config = self.setup.acquisition_config(self.channels, self.sample_rate_hz)
         self._fs = float(self.backend.configure(config))
-        self._checks = SignalChecks(self.channels, self.limits, self._fs, self._warn)
+        drive = ShakerDrive.from_setup(self.setup.to_dict())
+        self._checks = SignalChecks(self.channels, self.limits, self._fs, self._warn, drive)
         zero = silent_output(self._fs)
         steady = int(self.backend.write_periodic(zero, 0.0))
         self.backend.start()

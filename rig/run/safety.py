@@ -13,6 +13,11 @@ block,
   was (``SILENT_DROP``) (fault ``sensor``; on the drive-force channel, one measurement at the
   noise level: ``no-force``); a live sensor that responds weakly (an antiresonance, a low
   level) stays where it was from step to step, a dead one drops to its noise;
+- the shaker's coil current, estimated after each measurement from the drive point's force and
+  acceleration (:class:`analysis.planning.drive_current.ShakerDrive`, when the setup gives the
+  armature mass, the force constant and the amplifier's current limit): a warning once per step
+  near the limit, and a force lost after a measurement near it is named as the amplifier's
+  overload trip;
   and a waveform flat-topped at both peaks, the mark of a saturated sensor (``clipping``):
   near the signal chain's full scale (the sensor's output swing or the input range) a slight
   plateau is enough; far below it a sensor saturates only when it is faulty, and a structure's
@@ -37,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis.planning.drive_current import ShakerDrive
 from rig.config.plans import Limits
 from rig.run.faults import RunFault
 
@@ -56,6 +62,10 @@ logger = logging.getLogger(__name__)
 SILENT_SNR = 3.0  # a fundamental below this many noise standard errors is "no response"
 SILENT_STRIKES = 2  # consecutive silent measurements before a channel counts as dead
 SILENT_DROP = 0.2  # ... and only if its response per newton fell below this share of before
+#: a force lost after a measurement whose estimated coil current was at least this share of the
+#: amplifier's limit is named as the overload trip (the controller's first drive at the next
+#: frequency overshoots, and the current rises steeply toward a resonance of the drive point)
+TRIP_LIKELY = 0.5
 #: A waveform whose peaks are flatter than this (:func:`peak_exponent`) at a level of at least
 #: ``PLATEAU_NEAR_FULL_SCALE`` of the channel's full scale: a sensor at the end of its swing
 #: (a sine cut at about 92 % of its amplitude).
@@ -250,6 +260,8 @@ class SignalChecks:
     sample_rate_hz : float
     warn : callable(kind, message, channel)
         Called for alarms (once per channel and limit per step).
+    drive : ShakerDrive, optional
+        The shaker and amplifier, for the coil current (None: not estimated).
     """
 
     def __init__(
@@ -258,6 +270,7 @@ class SignalChecks:
         limits: Limits,
         sample_rate_hz: float,
         warn: Callable[[str, str, str], None],
+        drive: ShakerDrive | None = None,
     ) -> None:
         self.channels = tuple(channels)
         self.limits = resolve_limits(limits, self.channels)
@@ -268,6 +281,11 @@ class SignalChecks:
         self._silent = np.zeros(len(self.channels), dtype=int)
         self._reference = np.full(len(self.channels), np.nan)  # last |X_1 / F_1| when live
         self.context = ""  # "at 25.3 Hz, 4 N": appended to messages
+        roles = [c.role for c in self.channels]
+        has_acc = "drive-acceleration" in roles and "drive-force" in roles
+        self.drive = drive if has_acc else None
+        # the latest measurement with force: its estimated coil current [A] and where it was
+        self._last_current: tuple[float, str] | None = None
 
     def new_step(self, context: str) -> None:
         """Forget the alarms given (they warn again in the new step)."""
@@ -401,8 +419,7 @@ class SignalChecks:
                         "no-force",
                         f"no force at the drive point: {_describe(ch)} reads {amp:.3g} N at "
                         f"{freq:.4g} Hz with {drive_v:.3g} V drive, the level of its noise "
-                        f"({noise:.2g} N){self._where()}; the amplifier is off, muted or has "
-                        "tripped (overload), or the shaker is not connected",
+                        f"({noise:.2g} N){self._where()}; {self._no_force_cause()}",
                         ch.name,
                     )
                 raise RunFault(
@@ -413,7 +430,54 @@ class SignalChecks:
                     "circuit?)",
                     ch.name,
                 )
+        self._check_current(estimate, force, freq)  # the force is live: the current is real
         self._check_saturation(window, samples_per_period, estimate)
+
+    def _check_current(self, estimate, force: float, freq: float) -> None:
+        """Estimate the coil current of a measurement with force; warn near the limit."""
+        drive = self.drive
+        if drive is None or not force > 0:
+            return
+        roles = [c.role for c in self.channels]
+        f = estimate.phasors[roles.index("drive-force")]
+        a = estimate.phasors[roles.index("drive-acceleration")]
+        current = float(np.abs(f + drive.armature_mass_kg * a).sum() / drive.force_constant_n_per_a)
+        if not np.isfinite(current):
+            return
+        self._last_current = (
+            current,
+            (
+                f"at the last measurement with force ({freq:.4g} Hz, {force:.3g} N) the shaker "
+                f"drew about {current:.2g} A (estimated as (F + m a) / Bl from the drive "
+                f"point's force and acceleration) of the amplifier's {drive.current_limit_a:g} A "
+                "limit"
+            ),
+        )
+        if current > drive.usable_current_a and (-1, "current") not in self._alarmed:
+            self._alarmed.add((-1, "current"))
+            self._warn(
+                "amplifier-current",
+                f"the shaker draws about {current:.2g} A at {freq:.4g} Hz, {force:.3g} N "
+                f"(estimated from the drive point's force and acceleration){self._where()}, "
+                f"near the amplifier's {drive.current_limit_a:g} A overload limit: the drive "
+                "point is near a resonance, where the armature's inertia needs the current; "
+                "lower the level in this band if the amplifier trips",
+                "",
+            )
+
+    def _no_force_cause(self) -> str:
+        generic = (
+            "the amplifier is off, muted or has tripped (overload), or the shaker is not connected"
+        )
+        drive, last = self.drive, self._last_current
+        # far below the limit an overload is unlikely: then the generic causes stand first
+        if drive is None or last is None or last[0] < TRIP_LIKELY * drive.current_limit_a:
+            return generic
+        return (
+            f"{last[1]}: most likely its overload protection tripped at a resonance "
+            "of the drive point, where the armature's inertia needs the current; run this band "
+            "at a lower level (otherwise: " + generic + ")"
+        )
 
     def _check_saturation(self, window: np.ndarray, n: int, estimate) -> None:
         levels, exponents = flat_tops(window, n, estimate.nonperiodic_rms)

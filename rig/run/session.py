@@ -53,6 +53,7 @@ __all__ = [
     "TestRun",
     "lock_name",
     "open_rig",
+    "previous_rig",
     "summarize",
 ]
 
@@ -132,6 +133,43 @@ def open_rig(
                         logger.exception("muting the amplifier failed")
                     amp.close()
                 daq.close()
+
+
+def previous_rig(run_config: Any) -> tuple[str | None, dict[str, Any]]:
+    """The backend a measurement file was made on and, for the simulated rig, its truth and seed.
+
+    A follow-up test (the measurement that separates a diagnosis's tie) must run on the rig the
+    first run was made on: on the simulated rig that is its truth structure and noise seed,
+    which the file's ``config`` records in its ``run`` table (``backend``, ``backend_options``)
+    whether the command line or the GUI made it.
+
+    Parameters
+    ----------
+    run_config : dict
+        The file's ``config`` (:attr:`analysis.measurement_file.RunData.config`).
+
+    Returns
+    -------
+    backend : str or None
+        ``"sim"``, ``"ni"``, ... or None when the file does not say.
+    options : dict
+        ``truth`` (str) and ``seed`` (int), those the file records, for ``"sim"``; empty
+        otherwise.
+    """
+    before = run_config.get("run", {}) if isinstance(run_config, Mapping) else {}
+    before = before if isinstance(before, Mapping) else {}
+    backend = before.get("backend")
+    backend = backend if isinstance(backend, str) and backend else None
+    previous = before.get("backend_options", {})
+    if backend != "sim" or not isinstance(previous, Mapping):
+        return backend, {}
+    options: dict[str, Any] = {}
+    if isinstance(previous.get("truth"), str):
+        options["truth"] = previous["truth"]
+    seed = previous.get("seed")
+    if isinstance(seed, int) and not isinstance(seed, bool):
+        options["seed"] = seed
+    return backend, options
 
 
 def _prepare_amplifier(port: str, setup: LabSetup):

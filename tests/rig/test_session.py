@@ -7,7 +7,7 @@ import numpy as np
 
 from analysis.measurement_file import read_measurement
 from rig.run.events import RunPaused, StepFinished
-from rig.run.session import RunSession
+from rig.run.session import RunSession, previous_rig
 from tests.rig.rig_helpers import reduced_plan, setup_at, sim_daq
 
 PLAN = reduced_plan(levels_n=(2.0,), ranges=((21.0, 22.0, 1.0),))
@@ -71,3 +71,14 @@ def test_resume_continues_the_file_with_its_stored_plan(tmp_path):
     assert summary.status == "success"
     data = read_measurement(tmp_path / "r.h5")
     assert data.n_steps == 2 and len(data.resumes) == 1
+
+
+def test_the_rig_a_file_was_made_on_is_read_from_its_config() -> None:
+    sim = {"run": {"backend": "sim", "backend_options": {"truth": "damper_p4", "seed": 3}}}
+    assert previous_rig(sim) == ("sim", {"truth": "damper_p4", "seed": 3})
+    # only what the file records, with the right types: a seed of True is no seed
+    odd = {"run": {"backend": "sim", "backend_options": {"truth": 4, "seed": True}}}
+    assert previous_rig(odd) == ("sim", {})
+    ni = {"run": {"backend": "ni", "backend_options": {"device": "cDAQ1"}}}
+    assert previous_rig(ni) == ("ni", {})
+    assert previous_rig({}) == (None, {}) == previous_rig({"run": "x"}) == previous_rig(None)
