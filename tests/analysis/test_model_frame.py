@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from analysis.elements.base import ElementParameterError, make_element
+from analysis.elements import make_element
+from analysis.elements.base import ElementParameterError
 from analysis.fe import Joint, LumpedMass, Material, Member, Section, Spring
 from analysis.model import Model, ModelFileError, load_model
 from analysis.model_file import LinearPartSpec, to_document
