@@ -458,7 +458,8 @@ class Model:
         """:meth:`build_elements` for the given specs (errors name their index in ``specs``)."""
         import analysis.elements  # noqa: F401  (importing the library fills the registry)
 
-        from .elements.base import ELEMENT_TYPES, ElementParameterError, make_element
+        from .elements import ELEMENT_TYPES, make_element
+        from .elements.base import ElementParameterError
 
         values = self.values()
         out = []

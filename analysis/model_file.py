@@ -34,6 +34,7 @@ from .settings import (
     Text,
     build,
     declare,
+    dump,
     settings,
 )
 
@@ -72,7 +73,8 @@ _TOP_KEYS = {
 }
 DAMPING_MODAL = ("default_zeta", "per_mode")
 T = TypeVar("T")
-_FRAME_KEYS = ("nodes", "sections", "materials", "members", "joints", "springs", "masses")
+_FRAME_ROWS = ("members", "joints", "springs", "masses")
+_FRAME_KEYS = ("nodes", "sections", "materials", *_FRAME_ROWS)
 
 
 class ModelFileError(ConfigError):
@@ -237,7 +239,11 @@ Rayleigh = Annotated[
     PlainValidator(_rayleigh),
     PlainSerializer(lambda ab: {"alpha": ab[0], "beta": ab[1]}),
 ]
-DampingMatrix = Annotated[tuple[tuple[float, ...], ...] | str, PlainValidator(_matrix)]
+DampingMatrix = Annotated[
+    tuple[tuple[float, ...], ...] | str,
+    PlainValidator(_matrix),
+    PlainSerializer(lambda m: m if isinstance(m, str) else [list(row) for row in m]),
+]
 
 
 @settings()
@@ -311,9 +317,14 @@ class LinearPartSpec:
     files: dict[str, Text] = Field(
         default_factory=dict, description="The matrix files (the file's 'file' or 'files')."
     )
-    dof_map: Annotated[str | tuple[str, ...], PlainValidator(_dof_map)] | None = declare(
-        "DOF map: a file name or a list of 'node/direction'.", None
-    )
+    dof_map: (
+        Annotated[
+            str | tuple[str, ...],
+            PlainValidator(_dof_map),
+            PlainSerializer(lambda m: m if isinstance(m, str) else list(m)),
+        ]
+        | None
+    ) = declare("DOF map: a file name or a list of 'node/direction'.", None)
     masses: dict[str, Finite] = Field(
         default_factory=dict, description="Point masses [kg] at the translational DOFs of nodes."
     )
@@ -570,43 +581,26 @@ def parse_document(doc: dict, source: str, *, allow_truth: bool = False) -> dict
 
 
 # -- writing -----------------------------------------------------------------------------------
-def _section_doc(s: Section) -> dict:
-    if s.shape == "rect":
-        return {"shape": "rect", "b": s.b_m, "h": s.h_m}
-    if s.shape == "rect_tube":
-        return {"shape": "rect_tube", "outer": s.outer_m, "wall": s.wall_m}
-    return {"A": s.area_m2, "I": s.inertia_m4}
+# Every record is written as its declared dump (the file keys come from the declarations), less
+# what a reader supplies when a key is absent: unset optionals and declared defaults (infinite
+# bounds among them). What remains here is what the declarations cannot say.
+
+
+def _record(value: Any, exclude: set[str] | None = None) -> dict[str, Any]:
+    return dump(value, exclude_defaults=True, exclude=exclude)
+
+
+def _section(s: Section) -> dict[str, Any]:
+    """A section of a given shape without its area and second moment, computed on reading."""
+    return _record(s, None if s.shape == "general" else {"area_m2", "inertia_m4"})
 
 
 def _frame_doc(f: FrameSpec) -> dict:
-    members = []
-    for m in f.members:
-        t = {"name": m.name, "nodes": list(m.nodes), "section": m.section, "material": m.material}
-        if m.elements is not None:
-            t["elements"] = m.elements
-        else:
-            t["max_element_length"] = m.max_element_length_m
-        if m.nsm_kg_per_m != 0.0:
-            t["nsm"] = m.nsm_kg_per_m
-        members.append(t | {"group": m.group})
     doc = {
         "nodes": {n: list(xy) for n, xy in f.nodes.items()},
-        "sections": {n: _section_doc(s) for n, s in f.sections.items()},
-        "materials": {n: {"E": m.E, "rho": m.rho} for n, m in f.materials.items()},
-        "members": members,
-        "joints": [
-            {"name": j.name, "nodes": list(j.nodes), "x": j.x, "y": j.y, "rz": j.rz}
-            for j in f.joints
-        ],
-        "springs": [
-            {"name": s.name, "node": s.node, "direction": s.direction, "k": s.k}
-            | ({"to": s.to} if s.to is not None else {})
-            for s in f.springs
-        ],
-        "masses": [
-            {"name": m.name, "node": m.node, "m": m.m_kg, "J": m.J_kgm2, "group": m.group}
-            for m in f.masses
-        ],
+        "sections": {n: _section(s) for n, s in f.sections.items()},
+        "materials": {n: _record(m) for n, m in f.materials.items()},
+        **{key: [_record(r) for r in getattr(f, key)] for key in _FRAME_ROWS},
         "supports": {n: list(d) for n, d in f.supports.items()},
     }
     return {k: v for k, v in doc.items() if v}
@@ -622,20 +616,21 @@ def _relative(path: str, base: Path | None) -> str:
 
 
 def _dofref_doc(ref: DofRef, points: dict[int, MeasurementPoint]) -> dict:
+    """A point reference as the point (its direction only where it is not the point's)."""
     if ref.point is None:
-        return {"node": ref.node, "direction": ref.direction}
-    t: dict[str, Any] = {"point": ref.point}
-    if ref.direction != points[ref.point].direction:
-        t["direction"] = ref.direction
+        return _record(ref)
+    same = ref.direction == points[ref.point].direction
+    return _record(DofRef(point=ref.point, direction=None if same else ref.direction))
+
+
+def _linear_part_doc(lp: LinearPartSpec, base: Path | None) -> dict:
+    """The file names relative to ``base``; an archive's one file under the file's ``file``."""
+    t = _record(lp)
+    files = {k: _relative(v, base) for k, v in t.pop("files").items()}
+    t = {"format": t.pop("format")} | (files if lp.format != "mtx" else {"files": files}) | t
+    if isinstance(lp.dof_map, str):
+        t["dof_map"] = _relative(lp.dof_map, base)
     return t
-
-
-def _parameter_doc(p: Parameter) -> dict:
-    t: dict[str, Any] = {"value": p.value, "nominal": p.nominal}
-    t |= {k: getattr(p, k) for k in ("lower", "upper") if math.isfinite(getattr(p, k))}
-    t |= {"calibrate": p.calibrate, "scaling": p.scaling, "unit": p.unit, "group": p.group}
-    t |= {"prior_rel_std": p.prior_rel_std} if p.prior_rel_std is not None else {}
-    return t | ({"description": p.description} if p.description else {})
 
 
 def to_document(model: Any, base: Path | None = None) -> dict:
@@ -645,47 +640,29 @@ def to_document(model: Any, base: Path | None = None) -> dict:
     ----------
     model : Model
     base : Path, optional
-        Directory the file is written to; linear-part files are written relative to it
-        when they lie below it, else as absolute paths.
+        Directory the file is written to; linear-part and damping-matrix files are written
+        relative to it when they lie below it, else as absolute paths.
     """
     doc: dict[str, Any] = {"title": model.title} if model.title else {}
     if model.frame is not None:
         doc |= _frame_doc(model.frame)
     else:
-        lp = model.linear_part
-        t: dict[str, Any] = {"format": lp.format}
-        files = {k: _relative(v, base) for k, v in lp.files.items()}
-        t |= {"file": files["file"]} if lp.format != "mtx" else {"files": files}
-        if isinstance(lp.dof_map, str):
-            t["dof_map"] = _relative(lp.dof_map, base)
-        elif lp.dof_map is not None:
-            t["dof_map"] = list(lp.dof_map)
-        if lp.masses:
-            t["masses"] = dict(lp.masses)
-        doc["linear_part"] = t
-    doc["points"] = {
-        str(n): {"node": p.node, "direction": p.direction}
-        | ({"xy": list(p.xy)} if p.xy is not None else {})
-        for n, p in model.points.items()
-    }
-    doc["parameters"] = {n: _parameter_doc(p) for n, p in model.parameters.items()}
+        doc["linear_part"] = _linear_part_doc(model.linear_part, base)
+    doc["points"] = {str(n): _record(p, {"number"}) for n, p in model.points.items()}
+    # a group left out is "linear", as the reader assumes for a parameter no element uses
+    doc["parameters"] = {n: _record(p, {"name"}) for n, p in model.parameters.items()}
     doc["nonlinear"] = [
-        {"name": s.name, "kind": s.kind, "at": _dofref_doc(s.at, model.points)}
-        | ({"to": _dofref_doc(s.to, model.points)} if s.to is not None else {})
-        | {"params": dict(s.params), "options": dict(s.options)}
+        _record(s)
+        | {
+            k: _dofref_doc(r, model.points)
+            for k, r in (("at", s.at), ("to", s.to))
+            if r is not None
+        }
         for s in model.nonlinear
     ]
-    d = model.damping
-    if d.rayleigh is not None:
-        doc["damping"] = {"rayleigh": {"alpha": d.rayleigh[0], "beta": d.rayleigh[1]}}
-    elif isinstance(d.matrix, str):
-        doc["damping"] = {"matrix": _relative(d.matrix, base)}
-    elif d.matrix is not None:
-        doc["damping"] = {"matrix": [list(row) for row in d.matrix]}
-    else:
-        doc["damping"] = {"default_zeta": d.default_zeta}
-    if d.per_mode:
-        doc["damping"]["per_mode"] = {str(k): v for k, v in d.per_mode.items()}
+    doc["damping"] = _record(model.damping)
+    if isinstance(model.damping.matrix, str):
+        doc["damping"]["matrix"] = _relative(model.damping.matrix, base)
     if model.truth is not None:
         doc["truth"] = model.truth
     return {k: v for k, v in doc.items() if v != [] and v != {}}

@@ -271,10 +271,26 @@ def build(
         raise error(source, (*at, *first.path), first.problem) from first.__cause__
 
 
-def dump(value: Any) -> dict[str, Any]:
+def dump(
+    value: Any, *, exclude_defaults: bool = False, exclude: set[str] | None = None
+) -> dict[str, Any]:
     """The plain data of a settings object (lists, strings, numbers; unset optionals left
-    out), as :func:`build` reads it back."""
-    return _adapter(type(value)).dump_python(value, mode="json", exclude_none=True, by_alias=True)
+    out), as :func:`build` reads it back, under the file keys.
+
+    ``exclude_defaults`` also leaves out every field (in nested tables too) whose value is its
+    declared default, which :func:`build` supplies again: a file written for people then holds
+    what differs from the defaults. ``exclude`` leaves out fields by name (a name the document
+    holds elsewhere, as a table key, or a value derived from other fields). Floats stay floats:
+    an infinite value is ``inf``, never ``None`` or a string.
+    """
+    return _adapter(type(value)).dump_python(
+        value,
+        mode="json",
+        exclude_none=True,
+        by_alias=True,
+        exclude_defaults=exclude_defaults,
+        exclude=exclude,
+    )
 
 
 # ------------------------------------------------------------------------ declarations

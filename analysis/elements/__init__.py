@@ -7,7 +7,7 @@ elements by name with :func:`make_element`. Sign convention and how to add a kin
 
 from __future__ import annotations
 
-from .base import ELEMENT_TYPES, ElementEval, NonlinearElement, make_element, register
+from .base import ELEMENT_TYPES, ElementEval, NonlinearElement, register
 from .contact import HertzContact
 from .damping import CubicDamper, LinearDamper, QuadraticDamper
 from .friction import CoulombFriction
@@ -42,6 +42,19 @@ __all__ = [
     "make_element",
     "register",
 ]
+
+
+def make_element(kind: str, **values: float) -> NonlinearElement:
+    """Create an element of a registered ``kind`` (as named in model files). It lives in the
+    package, not in :mod:`~analysis.elements.base`, so that whoever creates an element has
+    imported every built-in kind (and the base module needs none of them)."""
+    try:
+        cls = ELEMENT_TYPES[kind]
+    except KeyError:
+        raise ValueError(
+            f"unknown nonlinear element kind {kind!r}; known: {sorted(ELEMENT_TYPES)}"
+        ) from None
+    return cls(**values)
 
 
 def _constraint(cls: type[NonlinearElement], name: str) -> str | None:

@@ -26,7 +26,6 @@ __all__ = [
     "ElementEval",
     "ElementParameterError",
     "NonlinearElement",
-    "make_element",
     "register",
 ]
 
@@ -272,17 +271,3 @@ class NonlinearElement:
         args = ", ".join(f"{k}={v!r}" for k, v in self.params.items())
         opts = "".join(f", {k}={v!r}" for k, v in self.options.items())
         return f"{type(self).__name__}({args}{opts})"
-
-
-def make_element(kind: str, **values: float) -> NonlinearElement:
-    """Create an element of a registered ``kind`` (as named in model files)."""
-    # Importing the package registers the built-in library.
-    import analysis.elements  # noqa: F401
-
-    try:
-        cls = ELEMENT_TYPES[kind]
-    except KeyError:
-        raise ValueError(
-            f"unknown nonlinear element kind {kind!r}; known: {sorted(ELEMENT_TYPES)}"
-        ) from None
-    return cls(**values)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +20,7 @@ from analysis.model import (
     ParameterBoundsWarning,
     load_model,
 )
+from analysis.model_file import to_document
 from analysis.settings import build, dotted, dump
 
 
@@ -513,3 +516,108 @@ def test_records_built_in_python_name_the_class_and_field():
         DampingSpec(default_zeta=1.0)
     with pytest.raises(ValueError, match="give a point, or a node and a direction"):
         DofRef(node="tip")
+
+
+# -- writing: from the declarations, read back to an equal model ---------------------------
+TRUTHS = sorted((ROOT / "sim_backend/truths").glob("*.toml"))
+
+
+def _truth(path: Path):
+    def make(tmp_path: Path) -> Model:
+        import sim_backend.hysteresis  # noqa: F401  (registers the simulator-only element kinds)
+
+        return load_model(path, allow_truth=True)
+
+    return make
+
+
+def _loaded(text: str, tmp_path: Path) -> Model:
+    path = tmp_path / "model.toml"
+    path.write_text(text)
+    return load_model(path)
+
+
+def _damping_matrix(tmp_path: Path) -> Model:
+    model = Model.from_toml_text(SIMPLE)
+    C = 1e-4 * model.assemble().K + 0.1 * model.assemble().M
+    return model.with_damping(DampingSpec(matrix=tuple(map(tuple, C))))
+
+
+def _damping_matrix_file(tmp_path: Path) -> Model:
+    model = Model.from_toml_text(SIMPLE)
+    np.save(tmp_path / "C.npy", 1e-4 * model.assemble().K)
+    return _loaded(SIMPLE + '[damping]\nmatrix = "C.npy"\n', tmp_path)
+
+
+def _archive(tmp_path: Path) -> Model:
+    from analysis.matrix_io import export_linear
+
+    export_linear(Model.from_toml_text(SIMPLE), tmp_path / "simple.npz")
+    text = '[linear_part]\nformat = "npz"\nfile = "simple.npz"\n[linear_part.masses]\ntip = 0.1\n'
+    return _loaded(text + '[points.1]\nnode = "tip"\ndirection = "y"\n', tmp_path)
+
+
+WRITTEN = {
+    "reference": lambda tmp_path: load_model(),
+    "features": lambda tmp_path: Model.from_toml_text(FEATURES),
+    # kc stays in group "nonlinear" with no element using it: not what a reader would assume
+    "unused parameter": lambda tmp_path: Model.from_toml_text(FEATURES).without_nonlinear("stop"),
+    "rayleigh": lambda tmp_path: Model.from_toml_text(
+        SIMPLE + "[damping]\nrayleigh = { alpha = 0.5, beta = 2e-5 }\n"
+    ),
+    "damping matrix": _damping_matrix,
+    "damping matrix file": _damping_matrix_file,
+    "linear part archive": _archive,
+    **{f"examples/{p.name}": (lambda tmp_path, p=p: load_model(p)) for p in SHIPPED},
+    **{f"truths/{p.name}": _truth(p) for p in TRUTHS},
+}
+
+
+@pytest.mark.parametrize("make", WRITTEN.values(), ids=WRITTEN.keys())
+def test_the_written_file_reads_back_to_an_equal_model(tmp_path, make):
+    model = make(tmp_path)
+    again = Model.from_toml_text(model.to_toml(), str(tmp_path / "x.toml"), allow_truth=True)
+    parts = ("parameters", "points", "nonlinear", "damping", "frame", "linear_part", "truth")
+    for part in (*parts, "title"):
+        assert getattr(again, part) == getattr(model, part), part
+    saved = model.save(tmp_path / "saved.toml")
+    assert load_model(saved, allow_truth=True) == model
+    # infinite bounds are left out, not written as inf, null or a string
+    for value in _scalars(tomllib.loads(saved.read_text())):
+        assert not isinstance(value, float) or math.isfinite(value)
+        assert str(value).lower() not in ("inf", "-inf", "infinity", "-infinity", "nan", "null")
+
+
+def _scalars(value):
+    if isinstance(value, dict | list):
+        for item in value.values() if isinstance(value, dict) else value:
+            yield from _scalars(item)
+    else:
+        yield value
+
+
+def test_the_writer_leaves_out_what_a_reader_supplies(tmp_path):
+    model = Model.from_toml_text(FEATURES)
+    doc = to_document(model)
+    # no bounds (infinite), no unit, no description, not calibrated, linear scaling, group
+    # "linear": only the values
+    assert doc["parameters"]["k_s"] == {"value": 1.0e4, "nominal": 1.0e4}
+    assert doc["parameters"]["kc"] == {"value": 1.0e6, "nominal": 1.0e6, "group": "nonlinear"}
+    assert doc["parameters"]["k_hinge"] == {
+        "value": 1.0e3, "nominal": 1.0e3, "lower": 0.0, "upper": 1.0e6, "scaling": "log"
+    }  # fmt: skip
+    (stop,) = doc["nonlinear"]
+    assert (stop["at"], stop["to"]) == ({"point": 1}, {"node": "d", "direction": "y"})
+    assert doc["sections"] == {
+        "s1": {"A": 1.0e-3, "I": 1.0e-7},
+        "s2": {"shape": "rect", "b": 0.02, "h": 0.01},
+    }
+    assert doc["joints"] == [{"name": "hinge", "nodes": ["b", "c"], "rz": "k_hinge"}]
+    assert doc["masses"] == [{"name": "mass0", "node": "d", "m": 0.5, "J": 1.0e-3}]
+    assert doc["damping"] == {"default_zeta": 0.02, "per_mode": {"2": 0.05}}
+    assert "damping" not in to_document(load_model())  # the declared default damping
+    assert to_document(_damping_matrix_file(tmp_path), tmp_path)["damping"] == {"matrix": "C.npy"}
+    at_x = NonlinearSpec("s", "hertz_contact", DofRef(point=1, direction="x"), params={})
+    assert to_document(model.with_nonlinear(at_x))["nonlinear"][-1]["at"] == {
+        "direction": "x", "point": 1
+    }  # fmt: skip
