@@ -11,9 +11,10 @@ import pytest
 
 import analysis.calibration.nonlinear as nonlinear
 from analysis.calibration.lhs import Distribution, latin_hypercube, paper_distributions
-from analysis.calibration.nonlinear import CalibrationSettings, calibrate_nonlinear
+from analysis.calibration.nonlinear import LHS_STAGE, CalibrationSettings, calibrate_nonlinear
 from analysis.calibration.objective import FRFObjective
 from analysis.calibration.parameters import ParameterSpace
+from analysis.events import StageDone
 from analysis.measurement_file import read_measurement
 from analysis.mhb.sweep import solve_steps
 from analysis.model import load_model
@@ -62,13 +63,13 @@ def _calibrate(model, data, monkeypatch, early_exit: bool):
 
             m.setattr(nonlinear, "screen_costs", score_all)
         at_lhs = {}
-        res = calibrate_nonlinear(
-            model,
-            data,
-            SETTINGS,
-            progress=lambda stage, info: at_lhs.setdefault(stage, made[0].steps_solved),
-        )
-    return res, at_lhs["lhs"]
+
+        def seen(event) -> None:  # the steps solved when the starts are all scored
+            if isinstance(event, StageDone):
+                at_lhs.setdefault(event.stage, made[0].steps_solved)
+
+        res = calibrate_nonlinear(model, data, SETTINGS, progress=seen)
+    return res, at_lhs[LHS_STAGE]
 
 
 @pytest.mark.slow
