@@ -75,7 +75,8 @@ def test_the_token_and_the_directory_are_user_only(shared_service):
         assert stat.S_IMODE((sdir / name).stat().st_mode) == 0o600, name
     info = json.loads((sdir / "endpoint.json").read_text())
     assert info["host"] == "127.0.0.1"  # loopback by default
-    assert "token (new)" in shared_service.output()
+    # the announcement follows the endpoint file (which says the service listens) at once
+    wait_for(lambda: "token (new)" in shared_service.output(), 20, "the service's announcement")
 
 
 @pytest.mark.timeout(60)
@@ -417,8 +418,8 @@ def test_stop_and_kill_mid_run_then_restart_reports_and_resumes(service_factory)
 
     # restart: the interrupted run is reported; resume continues it
     svc.start()
+    wait_for(lambda: f"rig resume {run_id}" in svc.output(), 20, "the service's announcement")
     assert f"{run_id} paper: {n_stopped}/{PAPER_STEPS} steps" in svc.output()
-    assert f"rig resume {run_id}" in svc.output()
     client = svc.client()
     status = client.status()
     assert status["interrupted"] == [run_id] and status["current"] is None
