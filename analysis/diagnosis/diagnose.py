@@ -642,8 +642,8 @@ def _first_verifications(
     linear_first = _linear_shortlist(sc.lin_base, sc.lin_fits, st)
     # the best law at its two best locations, the linear test's candidates and the next
     # pick (at an unmeasured location, else the next law) first; the other picks are
-    # dropped once a verified candidate is at the noise or the stage's processor time is
-    # spent
+    # dropped once a verified candidate is at the noise or the stage's allowance of
+    # evaluations is spent
     n_lead = min(2, len(first))
     origin: list = [*first[:n_lead], *linear_first, *first[n_lead:]]
     essential = len(origin) - len(first) + min(3, len(first))
