@@ -464,9 +464,10 @@ def calibrate_paper_way(stepped: Path, linear: Path, *, n_starts: int = 30, seed
 def _is_true(c, truth: str) -> bool:
     """``c`` is the hidden effect of ``truth``."""
     kind, location, side = TRUE_EFFECTS[truth]
+    # a place that moves as the truth's (candidates.SAME_MOTION) is the same element
     return (
         c.law.kind == kind
-        and c.location.name == location
+        and location in (c.location.name, *c.location.moves_as)
         and (side is None or c.law.options.get("side") == side)
     )
 

@@ -22,6 +22,8 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from analysis.model import DofRef, Model, NonlinearSpec, Parameter
 from analysis.model_file import parse_document, to_document
 
@@ -69,6 +71,9 @@ class Location:
         The measurement point, for point locations (in any direction).
     kind_ : str
         The location's kind where its fields alone do not tell it (:attr:`kind`).
+    alike : tuple of Location
+        Other places that move as this one does (:data:`SAME_MOTION`): the data of a test
+        cannot tell an element here from one there, so only this one is a candidate.
     """
 
     name: str
@@ -76,6 +81,12 @@ class Location:
     joint: tuple[str, str] | None = None
     point: int | None = None
     kind_: str = ""
+    alike: tuple[Location, ...] = ()
+
+    @property
+    def moves_as(self) -> tuple[str, ...]:
+        """The names of the places that move as this one (:attr:`alike`)."""
+        return tuple(loc.name for loc in self.alike)
 
     @property
     def slug(self) -> str:
@@ -334,6 +345,14 @@ POINT_DIRECTIONS = ("x", "y")
 #: between them) may hold an element between them.
 PAIR_REACH = 0.1
 
+#: Two pairs of nodes move as one place when the difference of their relative displacements
+#: is at most this share of their own under any static load (in the structure's flexibility
+#: norm, ``sqrt(d' K^-1 d)``): two nodes on one post move alike along it (the post is
+#: axially rigid), so a stop from the tip to either is the same element to any test below
+#: the post's axial modes. Only the shortest of such pairs is a candidate (a relative element
+#: spans the shortest way), naming the others.
+SAME_MOTION = 0.01
+
 
 #: What each scope of the candidate set holds (:func:`default_locations`). ``"measured"``:
 #: the places the sensors see directly (each point in its measured direction, each group of
@@ -383,7 +402,7 @@ def default_locations(model: Model, scope: str = "measured") -> list[Location]:
     if scope not in LOCATION_SCOPES:
         raise ValueError(f"locations: expected one of {sorted(LOCATION_SCOPES)}, got {scope!r}")
     kinds = LOCATION_SCOPES[scope]
-    return [
+    kept = [
         loc
         for loc in locs
         if loc.kind in kinds
@@ -391,6 +410,8 @@ def default_locations(model: Model, scope: str = "measured") -> list[Location]:
             scope == "structure" or loc.joint is None or loc.joint[1] in _MEASURED_JOINT_DIRECTIONS
         )
     ]
+    xy = model.frame.nodes if model.frame is not None else {}
+    return _merge_same_motion(kept, asm, xy)
 
 
 def _spring_locations(model: Model) -> list[Location]:
@@ -470,6 +491,65 @@ def _pair_locations(model: Model, asm, moves: Mapping[str, Sequence[str]]) -> li
                         )
                     )
     return locs
+
+
+#: Which of several places that move alike is the candidate: the one the sensors see most
+#: directly (the screen reads a measured point's states best), then the shortest pair.
+_SEEN_FIRST = ("point", "direction", "spring", "pair")
+
+
+def _merge_same_motion(locs: list[Location], asm, xy) -> list[Location]:
+    """``locs`` with the places that move as another (:data:`SAME_MOTION`) folded into it
+    (in its ``alike``): the point, direction, spring or pair the sensors see most
+    directly, the shortest pair among pairs. Groups and joints are kept as they are."""
+    single = [
+        i for i, loc in enumerate(locs) if loc.kind in _SEEN_FIRST and len(loc.incidences) == 1
+    ]
+    if len(single) < 2:
+        return locs
+
+    def dof(ref: DofRef) -> int:
+        if ref.node is not None:
+            return asm.dof_index(ref.node, ref.direction)
+        return asm.point_dof(ref.point, ref.direction)
+
+    B = np.zeros((len(single), asm.n_dofs))
+    span = []
+    for row, i in enumerate(single):
+        ((at, to),) = locs[i].incidences
+        B[row, dof(at)] += 1.0
+        if to is not None:
+            B[row, dof(to)] -= 1.0
+            span.append(math.dist(xy[at.node], xy[to.node]))
+        else:
+            span.append(0.0)
+    # the flexibility's Gram matrix of the incidences: |b_i - b_j|^2 = G_ii + G_jj - 2 G_ij
+    G = B @ np.linalg.solve(np.asarray(asm.K, float), B.T)
+    order = sorted(
+        range(len(single)),
+        key=lambda r: (_SEEN_FIRST.index(locs[single[r]].kind), span[r], single[r]),
+    )
+    kept: dict[int, list[Location]] = {}
+    for r in order:
+        home = next(
+            (
+                k
+                for k in kept
+                if G[r, r] + G[k, k] - 2 * G[r, k] <= SAME_MOTION**2 * min(G[r, r], G[k, k])
+            ),
+            None,
+        )
+        if home is None:
+            kept[r] = []
+        else:
+            kept[home].append(locs[single[r]])
+    folded = {single[r] for r in order if r not in kept}
+    twins = {single[r]: tuple(v) for r, v in kept.items() if v}
+    return [
+        dataclasses.replace(loc, alike=twins[i]) if i in twins else loc
+        for i, loc in enumerate(locs)
+        if i not in folded
+    ]
 
 
 def _element_law(kind: str, **options) -> Law:

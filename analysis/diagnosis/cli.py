@@ -232,9 +232,10 @@ def add_parsers(subparsers) -> None:
             "--locations",
             choices=sorted(LOCATION_SCOPES),
             default=DiagnosisSettings.locations,
-            help="candidate places: 'measured' (each point in its measured direction, spring "
-            "groups, joint rotations; default) or 'structure' (also every other direction, "
-            "each spring alone, pairs of nodes: more look-alikes, ties to separate)",
+            help="candidate places: 'structure' (every direction of each point, each spring "
+            "alone and each group, joint directions, pairs of nodes; default) or 'measured' "
+            "(each point in its measured direction, spring groups, joint rotations: faster, "
+            "but blind to one spring of a group and to elements between two nodes)",
         )
 
     sp = subparsers.add_parser("diagnose", help="which physical effect the model misses")

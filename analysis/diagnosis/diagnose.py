@@ -54,7 +54,12 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.diagnosis.candidates import Candidate, default_candidates, default_locations
+from analysis.diagnosis.candidates import (
+    Candidate,
+    Location,
+    default_candidates,
+    default_locations,
+)
 from analysis.diagnosis.compare import compare
 from analysis.diagnosis.linear_screen import LinearFit, LinearJob, run_linear_job
 from analysis.diagnosis.policy import FitSummary, Policy, simplest_of_next, tie_groups
@@ -71,7 +76,7 @@ from analysis.diagnosis.verify import Verified, VerifyJob, run_verify
 from analysis.events import Listener, StageDone
 from analysis.executors import Deferred, open_executor
 from analysis.measurement_file import SteppedSineData
-from analysis.model import Model
+from analysis.model import DofRef, Model
 from analysis.predict_branches import BranchMatchedPredictor
 
 __all__ = ["Diagnosis", "DiagnosisSettings", "RankedCandidate", "diagnose"]
@@ -284,20 +289,22 @@ def _class_leaders(fits: list[ScreenFit], where: str) -> list[ScreenFit]:
     return [f for f in here if f.candidate.location in keep]
 
 
-def _other_points(fits: list[ScreenFit], cand: Candidate, done) -> list[ScreenFit]:
-    """Screened fits of ``cand``'s law at the other measured points, best first, leaving out
-    the candidates in ``done``."""
+def _other_points(
+    fits: list[ScreenFit], cand: Candidate, done, kinds: tuple[str, ...] | None = ("point",)
+) -> list[ScreenFit]:
+    """Screened fits of ``cand``'s law at the other measured points (at other places of
+    ``kinds``; None: any), best first, leaving out the candidates in ``done``."""
     return [
         f
         for f in fits
         if f.candidate.law == cand.law
-        and f.candidate.location.kind == "point"
+        and (kinds is None or f.candidate.location.kind in kinds)
         and f.candidate.location != cand.location
         and f.candidate not in done
     ]
 
 
-def _walk_jobs(best, fits: list[ScreenFit], tried, n: int):
+def _walk_jobs(best, fits: list[ScreenFit], tried, n: int, kinds=("point",)):
     """The best verified law at the next ``n`` measured points the screen ranks it at, each
     started from the best's fit (its own values and the model's nonlinear parameters): a
     screen ranks neighbouring points of a strong effect loosely, a fit from a neighbour's
@@ -306,7 +313,7 @@ def _walk_jobs(best, fits: list[ScreenFit], tried, n: int):
     names = cand.parameter_names()
     values = {p: best.parameters[n] for p, n in names.items() if n in best.parameters}
     known = {n: v for n, v in best.parameters.items() if n not in names.values()}
-    return [(f, values, known) for f in _other_points(fits, cand, tried)[:n]]
+    return [(f, values, known) for f in _other_points(fits, cand, tried, kinds)[:n]]
 
 
 def _merge(done: list[Verified], i: int, v: Verified) -> None:
@@ -515,6 +522,9 @@ def diagnose(
         run, further = _first_verifications(sc, jobs, ex, say)
         _continue_falling(run, further, jobs, ex, say)
         _walk_from_best(run, sc, jobs, ex, say)
+        if _look_alikes(run, sc, jobs, ex, say):
+            # the best moved to a look-alike place: the walk from there
+            _walk_from_best(run, sc, jobs, ex, say)
         _second_picks(run, sc, jobs, ex, say)
         _restart_best(run, jobs, ex, say)
     timings["verify_s"] = time.perf_counter() - t2
@@ -725,6 +735,84 @@ def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say: Listen
     ]
     run.done += [p.result() for p in more]
     run.origin += [f for f, _, _ in walk]
+
+
+def look_alike_places(where: Location, places) -> list[Location]:
+    """The places of ``places`` where an element acts as one at ``where`` would, seen
+    through the sensors: a group's springs each alone and a spring's groups (one member's law
+    fits as the group's with a smaller parameter, the group's as a member's), a point's pairs
+    in the same direction (an element to ground, or to a node that barely moves, fit alike)
+    and a pair's point to ground. A place stands also for those that move as it
+    (:attr:`Location.alike`)."""
+
+    def same(a: DofRef, b: DofRef) -> bool:
+        return (a.node, a.direction) == (b.node, b.direction)
+
+    def related(w: Location, loc: Location) -> bool:
+        if not w.incidences or not loc.incidences:
+            return False
+        (at, _), (l_at, l_to) = w.incidences[0], loc.incidences[0]
+        if w.kind == "group":
+            return loc.kind == "spring" and loc.incidences[0] in w.incidences
+        if w.kind == "spring":
+            return loc.kind == "group" and w.incidences[0] in loc.incidences
+        if w.kind in ("point", "direction"):
+            return loc.kind == "pair" and same(l_at, at)
+        if w.kind == "pair":
+            return loc.kind in ("point", "direction") and l_to is None and same(l_at, at)
+        return False
+
+    return [
+        loc
+        for loc in places
+        if loc != where
+        and any(related(w, x) for w in (where, *where.alike) for x in (loc, *loc.alike))
+    ]
+
+
+def _best_index(run: _Verifying) -> int | None:
+    ranked = [i for i in np.argsort([v.chi2_per_dof() for v in run.done]) if not run.done[i].failed]
+    return int(ranked[0]) if ranked else None
+
+
+def _look_alikes(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say: Listener) -> bool:
+    """The best verified law at its look-alike places (:func:`look_alike_places`), each
+    started from the best's fit, when the best explains the misfit or went most of the way:
+    the full model's fit, not the screen's coarse reading of unmeasured places, then ranks
+    them, and a tie among them is reported as one (docs/diagnosis.md, "Look-alike
+    places"). Returns whether the best is now at one of them."""
+    done, origin = run.done, run.origin
+    lead = _best_index(run)
+    if lead is None or not isinstance(origin[lead], ScreenFit):
+        return False
+    if not run.policy.look_alike(FitSummary.of(done[lead])):
+        return False
+    cand = origin[lead].candidate
+    places = list(dict.fromkeys(f.candidate.location for f in sc.fits))
+    alike = look_alike_places(cand.location, places)
+    tried = [o.candidate for o in origin]
+    fits = [
+        f
+        for f in sc.fits
+        if f.candidate.law == cand.law
+        and f.candidate.location in alike
+        and f.candidate not in tried
+    ]
+    walk = _walk_jobs(done[lead], fits, tried, len(fits), kinds=None)
+    if not walk:
+        return False
+    say(StageDone("look-alike places", count=len(walk)))
+    more = [
+        Deferred(
+            ex,
+            run_verify,
+            dataclasses.replace(jobs.verify(f.candidate, values, known), give_up_chi2=run.bar),
+        )
+        for f, values, known in walk
+    ]
+    run.done += [p.result() for p in more]
+    run.origin += [f for f, _, _ in walk]
+    return _best_index(run) != lead
 
 
 def _second_picks(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say: Listener) -> None:

@@ -167,6 +167,14 @@ class Policy:
             return "points" if rms <= self.st.explained_rms or self.promising(best) else None
         return "laws" if rms > self.st.adequate_rms else None
 
+    def look_alike(self, best: FitSummary) -> bool:
+        """The best's law goes to its look-alike places (one spring of its group, its point's
+        element to a nearby node, ...) when it explains the misfit or went most of the way:
+        where it explains little, no place of it is the answer."""
+        return not best.failed and (
+            best.rms_over_noise <= self.st.explained_rms or self.promising(best)
+        )
+
     def second_stage(self, done: Sequence[FitSummary], n_second: int) -> bool:
         """The short list's second stage runs: none explains the misfit and allowance is left."""
         return n_second > 0 and self.unexplained(done) and self.left(done) > 0

@@ -125,9 +125,11 @@ class DiagnosisSettings:
         lt=1,
     )
     locations: Literal["measured", "structure"] = declare(
-        "The candidates' places (LOCATION_SCOPES): the ones the sensors see directly, or also "
-        "every other direction, each spring alone and pairs of nodes (more look-alikes).",
-        "measured",
+        "The candidates' places (LOCATION_SCOPES): every place of the structure (each point "
+        "in every direction it moves in, each spring alone and each group, every joint "
+        "direction, pairs of nodes), or only the ones the sensors see directly (a faster "
+        "screen that cannot reach one spring of a group or an element between two nodes).",
+        "structure",
     )
 
 
@@ -177,6 +179,7 @@ class RankedCandidate:
             "label": self.candidate.label,
             "kind": self.candidate.law.kind,
             "location": self.candidate.location.name,
+            "moves_as": list(self.candidate.location.moves_as),
             "linear": self.candidate.is_linear,
             "n_params": self.candidate.n_params,
             "bic": self.bic,
@@ -246,13 +249,14 @@ class Diagnosis:
         return self.refit.rms_over_noise() if self.refit is not None else math.nan
 
     def rank_of(self, kind: str, location: str, side: int | None = None) -> int | None:
-        """Rank (1 = best) of a law at a location among the verified candidates, with ties:
-        a candidate in the best group counts as first; None if not verified."""
+        """Rank (1 = best) of a law at a location (or at a place that moves as it,
+        :attr:`Location.moves_as`) among the verified candidates, with ties: a candidate in
+        the best group counts as first; None if not verified."""
         for r in self.ranking:
             c = r.candidate
             if (
                 c.law.kind == kind
-                and c.location.name == location
+                and location in (c.location.name, *c.location.moves_as)
                 and (side is None or c.law.options.get("side") == side)
             ):
                 return 1 if r.group == 1 else r.rank
@@ -322,6 +326,13 @@ class Diagnosis:
                     + f" (best fit first: {g[0].candidate.label}, by "
                     f"{g[1].bic - g[0].bic:.1f} BIC)"
                 )
+            for r in g:
+                if r.candidate.location.moves_as:
+                    lines.append(
+                        f"  {r.candidate.location.name} moves as "
+                        f"{', '.join(r.candidate.location.moves_as)}: an element at any of "
+                        "these is the same to this structure"
+                    )
         else:
             best = self.ranking[0] if self.ranking else None
             lines.append(

@@ -78,28 +78,31 @@ def test_linear_laws_are_reported_as_linear() -> None:
 def test_locations_come_from_the_structure(reference_model) -> None:
     from analysis.diagnosis.candidates import default_locations
 
-    locs = {loc.name: loc for loc in default_locations(reference_model, "structure")}
+    places = default_locations(reference_model, "structure")
+    locs = {loc.name: loc for loc in places}
+    # every place, those folded into one that moves as they do included
     kinds: dict[str, set[str]] = {}
-    for name, loc in locs.items():
-        kinds.setdefault(loc.kind, set()).add(name)
+    for loc in places:
+        kinds.setdefault(loc.kind, set()).update({loc.name, *loc.moves_as})
+    every = set().union(*kinds.values())
     # every spring on its own and the group sharing k_mount, named by what they are
-    assert kinds["spring"] == {
-        f"spring mount_{s}" for s in ("left_x", "left_y", "right_x", "right_y")
-    }
+    assert {f"spring mount_{s}" for s in ("left_x", "left_y", "right_x", "right_y")} <= every
     assert kinds["group"] == {"springs k_mount"}
     assert len(locs["springs k_mount"].incidences) == 4
     # every rigid direction of the clamp
     assert kinds["joint"] == {"joint clamp x", "joint clamp y", "joint clamp rz"}
     # each point in the other direction the frame moves in there (beam points measure y)
-    assert {"point 7 x", "point 13 y"} <= kinds["direction"]
-    assert len(kinds["direction"]) == len(reference_model.points)
+    assert {"point 7 x", "point 13 y"} <= every
+    assert len({n for n in every if n.startswith("point") and n[-2:] in (" x", " y")}) >= len(
+        reference_model.points
+    )
     # two nodes of different members within reach; none along one member (point 6 and the tip
     # are 33 mm apart on the beam), none between coincident nodes (the clamp is a joint)
     assert "point 7 to right_top y" in kinds["pair"]
     at, to = locs["point 7 to right_top y"].incidences[0]
     assert (at.node, to.node, at.direction, to.direction) == ("tip", "right_top", "y", "y")
-    assert not any("point 6 to point 7" in n or "point 7 to point 6" in n for n in kinds["pair"])
-    assert not any("beam_root" in n or "left_top" in n for n in kinds["pair"])
+    assert not any("point 6 to point 7" in n or "point 7 to point 6" in n for n in every)
+    assert not any("beam_root" in n or "left_top" in n for n in every)
     # a mass only at a point's own location (it acts in every direction of its node)
     structure = default_candidates(reference_model, scope="structure")
     masses = {c.location.kind for c in structure if c.law.kind == "mass"}
@@ -135,3 +138,69 @@ def test_springs_not_sharing_a_parameter_form_no_group(reference_model) -> None:
     model = dataclasses.replace(reference_model, frame=dataclasses.replace(frame, springs=springs))
     kinds = {loc.kind for loc in default_locations(model, "structure")}
     assert "group" not in kinds and "spring" in kinds
+
+
+def test_places_that_move_alike_are_one_candidate(reference_model, monkeypatch) -> None:
+    """Two places whose motions differ by under SAME_MOTION of their own under any static load
+    are one candidate (the one the sensors see most directly, then the shortest pair), the
+    others named in ``moves_as``; checked against the displacements under random loads."""
+    import numpy as np
+
+    from analysis.diagnosis import candidates
+    from analysis.diagnosis.candidates import SAME_MOTION, default_locations
+
+    places = default_locations(reference_model, "structure")
+    # every place with its incidences, before places that move alike are folded
+    with monkeypatch.context() as m:
+        m.setattr(candidates, "_merge_same_motion", lambda locs, asm, xy: locs)
+        unfolded = {x.name: x.incidences for x in default_locations(reference_model, "structure")}
+    by_name = {loc.name: loc for loc in places}
+    folded = {alias: loc.name for loc in places for alias in loc.moves_as}
+    # the right post is axially rigid: its y motion is the right mount's, at both its points
+    assert folded["spring mount_right_y"] == "point 12 y"
+    assert folded["point 13 y"] == "point 12 y"
+    # the shorter of two pairs that move alike is kept (the tip to the post's top)
+    assert folded["point 7 to point 13 y"] == "point 7 to right_top y"
+    # across the post the tip's x motion differs from the post's: two places
+    assert "point 7 to right_top x" in by_name and "point 7 to point 13 x" in by_name
+    asm = reference_model.assemble()
+    rng = np.random.default_rng(1)
+    loads = rng.standard_normal((asm.n_dofs, 200))
+    u = np.linalg.solve(np.asarray(asm.K), loads)
+
+    def motion(name: str) -> np.ndarray:
+        ((at, to),) = unfolded[name]
+        out = u[asm.dof_index(at.node, at.direction)].copy()
+        if to is not None:
+            out -= u[asm.dof_index(to.node, to.direction)]
+        return out
+
+    for alias, home in folded.items():
+        a, b = motion(alias), motion(home)
+        assert np.max(np.abs(a - b)) <= SAME_MOTION * np.max(np.abs(b)), (alias, home)
+    a, b = motion("point 7 to right_top x"), motion("point 7 to point 13 x")
+    assert np.max(np.abs(a - b)) > 0.1 * np.max(np.abs(b))
+
+
+def test_the_look_alike_places_of_a_place(reference_model) -> None:
+    """A group's springs each alone (wherever they are folded), a spring's group, a point's
+    pairs in its direction and a pair's point; nothing for a place with no look-alike."""
+    from analysis.diagnosis.candidates import default_locations
+    from analysis.diagnosis.diagnose import look_alike_places
+
+    places = default_locations(reference_model, "structure")
+    by_name = {loc.name: loc for loc in places}
+
+    def alike(name: str) -> set[str]:
+        return {loc.name for loc in look_alike_places(by_name[name], places)}
+
+    # each mount spring alone, under its own name or that of a place that moves as it
+    found = look_alike_places(by_name["springs k_mount"], places)
+    reached = {n for loc in found for n in (loc.name, *loc.moves_as)}
+    assert {f"spring mount_{s}" for s in ("left_x", "left_y", "right_x", "right_y")} <= reached
+    assert all(loc.kind in ("spring", "direction", "point") for loc in found)
+    assert "springs k_mount" in alike("point 12 y")
+    assert alike("point 7") == {"point 7 to right_top y"}
+    assert alike("point 7 to right_top y") == {"point 7"}
+    assert alike("point 5") == set()  # no node of another member within reach
+    assert alike("joint clamp rz") == set()

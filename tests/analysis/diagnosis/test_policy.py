@@ -153,3 +153,16 @@ def test_the_simplest_of_the_next_laws() -> None:
     assert simplest_of_next(n_params, bics, 2) == [2, 0]
     assert simplest_of_next([1, 1, 1], [-5.0, -9.0, -7.0], 2) == [1, 2]
     assert simplest_of_next([], [], 2) == []
+
+
+@pytest.mark.parametrize(
+    ("best_rms", "refit_rms", "failed", "goes"),
+    [
+        (1.1, 3.0, False, True),  # explains the misfit
+        (2.5, 17.0, False, True),  # short of it, but went most of the way (2.5 <= 0.2 x 17)
+        (2.5, 3.0, False, False),  # explains little: none of its places is the answer
+        (1.0, 3.0, True, False),  # a failed fit has no law to move
+    ],
+)
+def test_the_best_goes_to_its_look_alike_places(best_rms, refit_rms, failed, goes) -> None:
+    assert policy(refit_rms).look_alike(fit(best_rms, failed=failed)) is goes

@@ -75,7 +75,7 @@ def test_a_place_beyond_the_measured_scope_is_screened_when_given(runs, referenc
     cand = next(
         c
         for c in default_candidates(reference_model, scope="structure")
-        if c.location.name == "point 7 x" and c.law.kind == "cubic_spring"
+        if c.location.name == "point 1 x" and c.law.kind == "cubic_spring"
     )
     fit = Screen(reference_model, data, locations=(cand.location,)).fit(cand)
     assert fit.candidate is cand and all(np.isfinite(v) for v in fit.values.values())
