@@ -29,9 +29,12 @@
    their allowance while still falling fast.
    Then, if the best sits at a measured point and explains the misfit or went most of the
    way, its law at the screen's next measured points, started from its fit (a neighbour can
-   explain a strong effect nearly to the noise), or, at an unmeasured location and not at
-   the noise, the simplest of the next laws there. If
-   none explains it, then, while allowance is left, the next laws, the best of each law
+   explain a strong effect nearly to the noise), or, at an unmeasured location, the
+   simplest of the next laws there (look-alike laws there screen alike). Then, if the best
+   explains the misfit or went most of the way, its law at its look-alike places (a
+   group's springs each alone, a point's elements to the nodes near it, ...: see
+   :func:`look_alike_places`), from its fit; should one of them be the best, the walk above
+   from there. If none explains it, then, while allowance is left, the next laws, the best of each law
    family the evidence points at, and further starts for the best two. Every limit counts
    work (iterations, evaluations of the objective), never time: the same data and settings
    give the same diagnosis on any machine, however busy.

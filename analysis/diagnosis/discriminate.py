@@ -6,7 +6,11 @@ each of the paper's frequency ranges, outputs at every measurement point) and th
 *discriminating power* of a (sensor, level, range) is the RMS over its steps and orders of
 ``|Y_a - Y_b| / sigma`` for the pair of candidates it separates worst, ``sigma`` the planning
 noise model's standard error of each phasor (:func:`analysis.planning.information.phasor_sigma`).
-The best configuration is the one a test should add, among those the rig's drive can run: where
+Besides the paper's ranges, a band around each mode of the structure below their top that none
+of them covers (:func:`mode_ranges`): tied places differ most where they move, and a place the
+paper's band hardly moves (a mount, in the frame's suspension modes below it) moves most in its
+own modes. The best configuration is the one a test should add, among those the rig's drive
+can run: where
 the file's lab setup gives the shaker's armature mass and force constant and the amplifier's
 current limit (:class:`analysis.planning.drive_current.ShakerDrive`), a (level, range) whose
 predicted coil current exceeds the usable share of the limit for any tied candidate is left out
@@ -28,7 +32,7 @@ from analysis.planning.drive_current import ShakerDrive
 from analysis.planning.information import phasor_sigma
 from analysis.planning.sweeps import SweepJob, run_sweep
 
-__all__ = ["discriminate"]
+__all__ = ["discriminate", "mode_ranges"]
 
 
 def discriminate(
@@ -36,7 +40,7 @@ def discriminate(
     data: SteppedSineData,
     *,
     levels_n: Sequence[float] | None = None,
-    ranges: Sequence[FrequencyRange] = PAPER_RANGES,
+    ranges: Sequence[FrequencyRange] | None = None,
     noise: NoiseModel | None = None,
     n_best: int = 5,
     drive: ShakerDrive | None = None,
@@ -52,7 +56,8 @@ def discriminate(
     levels_n : sequence of float, optional
         Candidate levels (default: the file's).
     ranges : sequence of FrequencyRange
-        Candidate frequency ranges (default: the paper's seven 20 Hz ranges).
+        Candidate frequency ranges (default: the paper's seven 20 Hz ranges and
+        :func:`mode_ranges` of the first candidate's model).
     noise : NoiseModel, optional
         Default: the planning default (2 % and 0.01 m/s^2).
     drive : ShakerDrive, optional
@@ -84,6 +89,8 @@ def discriminate(
         # the rig runs the test with the file's sensors on, and their masses move the modes
         # (2.5 Hz at the beam's second bending mode), as the comparison's prediction has them
         models.append(model.add_masses(masses) if masses else model)
+    if ranges is None:
+        ranges = (*PAPER_RANGES, *mode_ranges(models[0], PAPER_RANGES))
     sensors = tuple(sorted(models[0].points))
     act = data.actuator.point
     drive = drive if drive is not None else ShakerDrive.from_setup(getattr(data, "setup", None))
@@ -148,6 +155,35 @@ def discriminate(
         "candidates": [g.candidate.label for g in group],
         "excluded": excluded,
     }
+
+
+#: Half-width of the band around a mode, as a share of its frequency, and its steps per band.
+MODE_BAND = 0.15
+MODE_BAND_STEPS = 30
+
+
+def mode_ranges(model: Model, covered: Sequence[FrequencyRange]) -> list[FrequencyRange]:
+    """A band of +-:data:`MODE_BAND` around each mode of ``model``'s linear structure below
+    the top of ``covered`` that no range of ``covered`` holds, stepped in
+    :data:`MODE_BAND_STEPS` (to 0.05 Hz), overlapping bands merged."""
+    top = max(r.stop_hz for r in covered)
+    freqs, _ = model.assemble().normal_modes()
+    bands: list[list[float]] = []
+    for f in sorted(float(x) for x in freqs if 0 < x < top):
+        if any(r.start_hz <= f <= r.stop_hz for r in covered):
+            continue
+        lo, hi = (1 - MODE_BAND) * f, min((1 + MODE_BAND) * f, top)
+        if bands and lo <= bands[-1][1]:
+            bands[-1][1] = max(bands[-1][1], hi)
+        else:
+            bands.append([lo, hi])
+    out = []
+    for lo, hi in bands:
+        step = max(round((hi - lo) / MODE_BAND_STEPS / 0.05) * 0.05, 0.05)
+        lo = round(lo / 0.05) * 0.05
+        n = max(int(round((hi - lo) / step)), 1)
+        out.append(FrequencyRange(round(lo, 2), round(lo + n * step, 2), round(step, 2)))
+    return out
 
 
 def _worst_pair_power(sweeps: Sequence, sensors: tuple[int, ...], noise: NoiseModel):

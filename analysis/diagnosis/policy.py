@@ -159,13 +159,15 @@ class Policy:
         """Where the best verified candidate goes on: ``kind`` is its location's kind (None for
         a linear candidate, which has nowhere to go). From a measured point (``"point"``), its
         law at the next points when it explains the misfit or went most of the way; from an
-        unmeasured location, the next laws there when it is not at the noise."""
-        if kind is None:
+        unmeasured location, the next laws there, even at the noise: look-alike laws there
+        screen alike (the screen reads the place's states coarsely), so the first verified is
+        not yet the best, and only the fit orders them or says they tie."""
+        if kind is None or best.failed:
             return None
         rms = best.rms_over_noise
         if kind == "point":
             return "points" if rms <= self.st.explained_rms or self.promising(best) else None
-        return "laws" if rms > self.st.adequate_rms else None
+        return "laws"
 
     def look_alike(self, best: FitSummary) -> bool:
         """The best's law goes to its look-alike places (one spring of its group, its point's
