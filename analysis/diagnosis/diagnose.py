@@ -34,8 +34,8 @@
    explains the misfit or went most of the way, its law at its look-alike places (a
    group's springs each alone, a point's elements to the nodes near it, ...: see
    :func:`look_alike_places`), from its fit; should one of them be the best, the walk above
-   from there. If none explains it, then, while allowance is left, the next laws, the best of each law
-   family the evidence points at, and further starts for the best two. Every limit counts
+   from there. If none explains it, then, while allowance is left, the next laws, the best
+   of each law family the evidence points at, and further starts for the best two. Every limit counts
    work (iterations, evaluations of the objective), never time: the same data and settings
    give the same diagnosis on any machine, however busy.
 5. **Rank** the verified candidates by BIC on the same steps against the recalibrated model;
