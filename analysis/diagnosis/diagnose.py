@@ -35,9 +35,9 @@
    group's springs each alone, a point's elements to the nodes near it, ...: see
    :func:`look_alike_places`), from its fit; should one of them be the best, the walk above
    from there. If none explains it, then, while allowance is left, the next laws, the best
-   of each law family the evidence points at, and further starts for the best two. Every limit counts
-   work (iterations, evaluations of the objective), never time: the same data and settings
-   give the same diagnosis on any machine, however busy.
+   of each law family the evidence points at, and further starts for the best two. Every
+   limit counts work (iterations, evaluations of the objective), never time: the same data
+   and settings give the same diagnosis on any machine, however busy.
 5. **Rank** the verified candidates by BIC on the same steps against the recalibrated model;
    candidates within ``tie_bic`` of the best form a tied group, ordered by BIC. The effect
    is *explained* when the best brings the residual to ``explained_rms`` of the noise;
