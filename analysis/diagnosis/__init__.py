@@ -34,6 +34,9 @@ diagnose
     Compare, evidence, screen, verify, rank, verdict: :func:`diagnose`.
 result
     The diagnosis' settings, ranking and verdict in words.
+readout
+    What the data show about a missing law no candidate explains: the describing function of
+    the force at a location against the amplitude, read against the standard laws'.
 discriminate
     The measurement that separates tied candidates (planning sweeps, prediction differences
     over the noise).
@@ -48,6 +51,7 @@ from analysis.diagnosis.candidates import Candidate, Law, Location, default_cand
 from analysis.diagnosis.compare import Block, Comparison, compare
 from analysis.diagnosis.diagnose import diagnose
 from analysis.diagnosis.linear_screen import LinearFit, linear_screen
+from analysis.diagnosis.readout import ForceReadout, read_missing_force
 from analysis.diagnosis.refit import Refit, refit
 from analysis.diagnosis.result import Diagnosis, DiagnosisSettings, RankedCandidate
 from analysis.diagnosis.screen import Screen, ScreenFit
@@ -64,6 +68,7 @@ __all__ = [
     "DiagnosisSettings",
     "Evidence",
     "Finding",
+    "ForceReadout",
     "Law",
     "LinearFit",
     "Location",
@@ -77,5 +82,6 @@ __all__ = [
     "diagnose",
     "find_signatures",
     "linear_screen",
+    "read_missing_force",
     "refit",
 ]

@@ -41,7 +41,9 @@
 5. **Rank** the verified candidates by BIC on the same steps against the recalibrated model;
    candidates within ``tie_bic`` of the best form a tied group, ordered by BIC. The effect
    is *explained* when the best brings the residual to ``explained_rms`` of the noise;
-   otherwise nothing in the library explains it and the tool says so. For a group, the
+   otherwise nothing in the library explains it and the tool says so, with what the data
+   show about the missing law at the best candidate's location (its describing function
+   against the amplitude, :mod:`analysis.diagnosis.readout`). For a group, the
    measurement that would separate its members is computed
    (:mod:`analysis.diagnosis.discriminate`).
 """
@@ -66,6 +68,7 @@ from analysis.diagnosis.candidates import (
 from analysis.diagnosis.compare import compare
 from analysis.diagnosis.linear_screen import LinearFit, LinearJob, run_linear_job
 from analysis.diagnosis.policy import FitSummary, Policy, simplest_of_next, tie_groups
+from analysis.diagnosis.readout import read_missing_force
 from analysis.diagnosis.result import Diagnosis, DiagnosisSettings, RankedCandidate
 from analysis.diagnosis.screen import (
     Screen,
@@ -532,6 +535,8 @@ def diagnose(
         _restart_best(run, jobs, ex, say)
     timings["verify_s"] = time.perf_counter() - t2
     _conclude(result, model, data, run)
+    if result.verdict == "unexplained":
+        _read_out(result, sc)
     timings["total_s"] = time.perf_counter() - t0
     return result
 
@@ -872,6 +877,26 @@ def _conclude(result: Diagnosis, model: Model, data, run: _Verifying) -> None:
         except (ValueError, RuntimeError) as exc:
             log.warning("no discriminating measurement: %s", exc)
         result.timings["discriminate_s"] = time.perf_counter() - t3
+
+
+def _read_out(result: Diagnosis, sc: _Screened) -> None:
+    """What the data show about the missing law, from the screen's force estimate at the best
+    verified candidate's location (else the screen's best law's): nothing in the library
+    explains the misfit, and the read-out says what kind of element to write."""
+    where = next(
+        (r.candidate.location for r in result.ranking if r.candidate.location.incidences), None
+    )
+    if where is None:
+        lead = _lead(sc.fits)
+        where = lead.candidate.location if lead is not None else None
+    if where is None:
+        return
+    t = time.perf_counter()
+    try:
+        result.readout = read_missing_force(sc.screen, where)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        log.warning("no read-out of the missing force at %s: %s", where.name, exc)
+    result.timings["readout_s"] = time.perf_counter() - t
 
 
 def _rank(model: Model, refit: Verified, origin: list, done: list[Verified], st):

@@ -10,6 +10,7 @@ from analysis.calibration.uncertainty import ADEQUATE_RMS
 from analysis.diagnosis.candidates import Candidate
 from analysis.diagnosis.compare import Comparison
 from analysis.diagnosis.linear_screen import LinearFit
+from analysis.diagnosis.readout import ForceReadout
 from analysis.diagnosis.screen import ScreenFit
 from analysis.diagnosis.signatures import Evidence
 from analysis.diagnosis.verify import Verified
@@ -217,6 +218,9 @@ class Diagnosis:
     rescreened : bool
         The screen ran from the model with its own parameters recalibrated (see
         :attr:`DiagnosisSettings.rescreen_ratio`); ``screen`` and ``baseline`` are that run's.
+    readout : ForceReadout or None
+        When nothing explains the misfit: what the data show about the missing law at the
+        best verified candidate's location (:mod:`analysis.diagnosis.readout`).
     """
 
     verdict: str
@@ -232,6 +236,7 @@ class Diagnosis:
     timings: dict[str, float] = field(default_factory=dict)
     settings: DiagnosisSettings = field(default_factory=DiagnosisSettings)
     rescreened: bool = False
+    readout: ForceReadout | None = None
 
     @property
     def group(self) -> list[RankedCandidate]:
@@ -343,6 +348,8 @@ class Diagnosis:
                     else ""
                 )
             )
+            if self.readout is not None:
+                lines.append("what the data show about the missing law: " + self.readout.text)
         if self.recommendation:
             lines.append("to separate the tied candidates: " + self.recommendation["text"])
         return "\n".join(lines)
@@ -380,5 +387,6 @@ class Diagnosis:
             "ranking": [r.to_json() for r in self.ranking],
             "group": [r.candidate.label for r in self.group],
             "recommendation": self.recommendation,
+            "readout": None if self.readout is None else self.readout.to_json(),
             "timings": self.timings,
         }

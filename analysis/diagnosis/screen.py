@@ -210,13 +210,21 @@ class _States:
     """The measured-order states of one force estimate (:meth:`Screen.states`) and what every
     fit at its location shares, computed once: the whitening at the data's states (``S0``),
     the start phasors (``X_init``), each incidence's state map (``maps``) and the model
-    elements' forces at the data's states (``known``, by element)."""
+    elements' forces at the data's states (``known``, by element).
+
+    ``g`` are the estimated forces themselves, columns in the order of the estimate: one per
+    model element, then one per incidence of the location, or, for a group larger than the
+    sensors resolve, one generalized force (``grouped``); ``Pg`` their derivative with respect
+    to the weighted data, from which their standard errors follow
+    (:mod:`analysis.diagnosis.readout` reads the missing force from them)."""
 
     U: np.ndarray  # (n, K, nD) states at the measured orders
     P: np.ndarray  # (n, K, nD, C) d U / d (weighted data)
     W: np.ndarray  # (n, K, C) weights
     Y: np.ndarray  # (n, K, C) the data
     grouped: bool
+    g: np.ndarray | None = None  # (n, K, nL) forces on the structure [N, or N m]
+    Pg: np.ndarray | None = None  # (n, K, nL, C) d g / d (weighted data)
     S0: np.ndarray | None = None
     X_init: np.ndarray | None = None
     maps: dict = field(default_factory=dict)
@@ -418,6 +426,7 @@ class Screen:
         grouped = B_loc is not None and B_loc.shape[0] + BK.shape[0] >= C
         out_U = np.empty((n, K, len(fr.dofs)), complex)
         ghat = []
+        Pg = []  # d g / d (weighted data)
         P_rows = []  # d U(orders, all D) / d (weighted data), real per step
         for kk, h in enumerate(bs.order_k):
             R = fr.R[:, h]  # (n, nD, 1 + nD)
@@ -436,9 +445,18 @@ class Screen:
             pinv = np.linalg.pinv(Aw, rcond=self.rcond)  # (n, nL, C)
             g = np.einsum("nlc,nc->nl", pinv, y * W[:, kk])
             ghat.append(g)
+            Pg.append(pinv)
             out_U[:, kk] = Rd * self._F[self.rows, kk][:, None] + np.einsum("nil,nl->ni", RL, g)
             P_rows.append(np.einsum("nil,nlc->nic", RL, pinv))  # complex (n, nD, C)
-        st = _States(out_U, np.stack(P_rows, axis=1), W, Y, grouped)
+        st = _States(
+            out_U,
+            np.stack(P_rows, axis=1),
+            W,
+            Y,
+            grouped,
+            g=np.stack(ghat, axis=1),
+            Pg=np.stack(Pg, axis=1),
+        )
         self._states[key] = st
         return st
 

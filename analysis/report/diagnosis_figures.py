@@ -1,4 +1,5 @@
-"""Figures of a diagnosis: residual maps, measured vs model, error history, before and after.
+"""Figures of a diagnosis: residual maps, measured vs model, error history, before and after,
+the missing force read out where nothing explains the misfit.
 
 Residual maps show the root of the chi-square per degree of freedom (1 = at the noise) on a
 log colour scale, so a failing block stands out at a glance: one map by sensor x order x level
@@ -25,6 +26,7 @@ __all__ = [
     "plot_diagnosis",
     "plot_error_history",
     "plot_evidence",
+    "plot_force_readout",
     "plot_frequency_level_map",
     "plot_measured_vs_model_levels",
     "plot_ranking",
@@ -241,7 +243,8 @@ def plot_ranking(diagnosis, path: str | Path, *, title: str = "") -> Path:
 
 def plot_diagnosis(diagnosis, folder: str | Path) -> list[Path]:
     """The figures of a diagnosis in ``folder``: the two residual maps, measured vs model, the
-    evidence and (when candidates were verified) the ranking."""
+    evidence, (when candidates were verified) the ranking and (when nothing explains the
+    misfit) what the data show about the missing law."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     cmp = diagnosis.comparison
@@ -257,6 +260,8 @@ def plot_diagnosis(diagnosis, folder: str | Path) -> list[Path]:
     ]
     if diagnosis.ranking:
         out.append(plot_ranking(diagnosis, folder / "ranking.png"))
+    if diagnosis.readout is not None:
+        out.append(plot_force_readout(diagnosis.readout, folder / "missing_force.png"))
     return out
 
 
@@ -267,3 +272,83 @@ def _by_level(ax, levels, measured, model, ylabel: str) -> None:
     ax.set_xlabel("level [N]")
     ax.set_ylabel(ylabel)
     ax.legend()
+
+
+def _readout_panel(ax, ro, y, sigma, bins, fit, label: str, unit: str) -> None:
+    """One describing function against the amplitude: the steps read (by level), their binned
+    means and, where its slope is resolved, the fit over the amplitudes it was made on (at
+    the fit's reference frequency)."""
+    seen = ro.seen
+    A = ro.amplitude
+    for lv in sorted(set(ro.level_n[seen].tolist())):
+        at = seen & (ro.level_n == lv)
+        ax.errorbar(
+            A[at], y[at], yerr=sigma[at], fmt="o", ms=3, lw=0.6, alpha=0.6, label=f"{lv:g} N"
+        )
+    if bins is not None:
+        ax.errorbar(
+            bins.A, bins.y, yerr=bins.sigma, fmt="s", color="k", ms=5, lw=1.2, label="binned"
+        )
+        lo, hi = np.min(bins.y - 3 * bins.sigma), np.max(bins.y + 3 * bins.sigma)
+        pts = y[seen]
+        lo = min(lo, np.percentile(pts, 5))
+        hi = max(hi, np.percentile(pts, 95))
+        pad = 0.1 * (hi - lo) + 1e-300
+        ax.set_ylim(lo - pad, hi + pad)
+    if fit is not None and fit.resolved:
+        grid = np.geomspace(fit.span[0], fit.span[1], 100)
+        ax.plot(grid, fit.at(grid), "k--", lw=1.2, label=f"fit, slope {fit.p:.2f}")
+    ax.set_xscale("log")
+    ax.set_xlabel(f"amplitude A [{ro.units['x']}]")
+    ax.set_ylabel(f"{label} [{unit}]")
+    ax.legend(fontsize=7)
+
+
+def plot_force_readout(readout, path: str | Path, *, title: str = "") -> Path:
+    """What the data show about a missing law (:class:`~analysis.diagnosis.readout.ForceReadout`):
+    the equivalent stiffness and damping of its first harmonic against the amplitude, and one
+    period of the restoring force against the displacement and the velocity, rebuilt from the
+    measured orders (mean left out)."""
+    ro = readout
+    u = ro.units
+    r = ro.reading
+    fig, axes = plt.subplots(2, 2, figsize=(11, 8))
+    what = "moment" if ro.rotation else "force"
+    _readout_panel(
+        axes[0, 0],
+        ro,
+        ro.k_eq,
+        ro.sigma_k,
+        None if r is None else r.k_bins,
+        None if r is None else r.stiffness,
+        "equivalent stiffness k_eq",
+        u["k"],
+    )
+    damping = None
+    if r is not None:
+        damping = r.damping if r.damping.changes else r.damping_whole
+    _readout_panel(
+        axes[0, 1],
+        ro,
+        ro.c_eq,
+        ro.sigma_c,
+        None if r is None else r.c_bins,
+        damping,
+        "equivalent damping c_eq",
+        u["c"],
+    )
+    for lp in ro.loops:
+        label = f"{lp['level_n']:g} N, {lp['frequency_hz']:.2f} Hz"
+        axes[1, 0].plot(lp["x"], lp["f"], lw=1, label=label)
+        axes[1, 1].plot(lp["v"], lp["f"], lw=1, label=label)
+    orders = ", ".join(ro.orders)
+    axes[1, 0].set_xlabel(f"displacement x [{u['x']}]")
+    axes[1, 1].set_xlabel(f"velocity v [{u['v']}]")
+    for ax in axes[1]:
+        ax.set_ylabel(f"restoring {what} f [{u['f']}]")
+        ax.set_title(f"one period from orders {orders} (mean not measured)", fontsize=8)
+        if ro.loops:
+            ax.legend(fontsize=7)
+    kind = "not read" if r is None else r.description
+    fig.suptitle(title or f"missing {what} at {ro.read_at}: {kind}", fontsize=10)
+    return _save(fig, path)

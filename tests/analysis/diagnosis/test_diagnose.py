@@ -165,3 +165,10 @@ def test_an_effect_outside_the_library_is_reported_unexplained(runs, reference_m
     assert result.verdict == "unexplained", result.summary()
     assert result.best is None
     assert "nothing in the element library explains" in result.summary()
+    # what the data show about the missing law, at the clamp: a joint that sticks and slips
+    ro = result.readout
+    assert ro is not None and ro.location == "joint clamp rz"
+    assert ro.kind == "stick_slip", ro.text
+    assert "what the data show about the missing law: " + ro.text in result.summary()
+    assert result.to_json()["readout"]["kind"] == "stick_slip"
+    assert result.timings["readout_s"] < 2.0  # the screen's states reused: no balance solved
