@@ -842,8 +842,10 @@ def _member_seen_most(screen, fr, location: Location, k1: int) -> Location:
     i = int(np.argmax(seen))
     inc = location.incidences[i]
     for loc in default_locations(screen.model, "structure"):
-        if loc.kind == "spring" and loc.incidences == (inc,):
-            return loc
+        # a spring may be folded into a place that moves as it (Location.alike)
+        for place in (loc, *loc.alike):
+            if place.kind == "spring" and place.incidences == (inc,):
+                return place
     return Location(f"{location.name} member {i + 1}", (inc,), kind_="spring")
 
 
