@@ -43,6 +43,10 @@ PALETTE = (
     "#F0E442",  # yellow
 )
 OK, WARN, ALARM = "#1b7f3b", "#b36b00", "#c0262d"
+#: Labelled mantissas of a logarithmic axis, densest first.
+LOG_STEPS = ((1, 1.5, 2, 3, 5, 7), (1, 2, 5), (1,))
+#: Room a tick label of a horizontal axis needs (``0.0002`` or ``1e-05`` and a gap), px.
+LABEL_PX = 56
 
 
 def color(i: int) -> str:
@@ -60,7 +64,8 @@ def configure_app(app: QtWidgets.QApplication) -> None:
 
 class LogAxis(pg.AxisItem):
     """A logarithmic axis labelled at 1, 2 and 5 times powers of ten in plain numbers (0.5, 20,
-    1e+03), with unlabelled ticks between: pyqtgraph's own labels crowd on a short axis."""
+    1e+03), with unlabelled ticks between: pyqtgraph's own labels crowd on a short axis. A
+    horizontal axis labels only the powers of ten where its labels, side by side, would touch."""
 
     def tickValues(self, minVal, maxVal, size):  # noqa: N802, N803 - pyqtgraph's names
         if not self.logMode or not (math.isfinite(minVal) and math.isfinite(maxVal)):
@@ -68,7 +73,13 @@ class LogAxis(pg.AxisItem):
         lo, hi = sorted((minVal, maxVal))
         decades = range(math.floor(lo), math.ceil(hi) + 1)
         span = hi - lo
-        steps = (1,) if span > 3 else (1, 2, 5) if span > 0.8 else (1, 1.5, 2, 3, 5, 7)
+        choice = 2 if span > 3 else 1 if span > 0.8 else 0
+        if self.orientation in ("top", "bottom") and size > 0:
+            per_decade = size / max(span, 1e-12)
+            last = 2 if span > 1 else 1  # below a decade, powers of ten alone may miss it
+            while choice < last and per_decade * _closest(LOG_STEPS[choice]) < LABEL_PX:
+                choice += 1
+        steps = LOG_STEPS[choice]
         major = [math.log10(m) + d for d in decades for m in steps]
         minor = [math.log10(m) + d for d in decades for m in range(2, 10)] if span <= 4 else []
         major = [v for v in major if lo <= v <= hi]
@@ -83,6 +94,12 @@ class LogAxis(pg.AxisItem):
         return [f"{10.0**v:.3g}" for v in values]
 
 
+def _closest(steps: tuple) -> float:
+    """The smallest gap, in decades, between labelled mantissas ``steps`` of a log axis."""
+    marks = [math.log10(m) for m in steps] + [1.0]
+    return min(b - a for a, b in zip(marks, marks[1:], strict=False))
+
+
 def _axis_font() -> QtGui.QFont:
     font = QtGui.QFont()
     font.setPointSize(FONT_PT - 1)
@@ -95,6 +112,7 @@ def make_plot(
     y_label: str,
     *,
     log_y: bool = False,
+    log_x: bool = False,
     legend: bool = True,
     x_values: bool = True,
     parent: QtWidgets.QWidget | None = None,
@@ -106,16 +124,21 @@ def make_plot(
     title : str
     x_label, y_label : str
         E.g. ``"frequency [Hz]"``.
-    log_y : bool
-        Logarithmic y axis.
+    log_y, log_x : bool
+        Logarithmic y, x axis (an item without log mode of its own, such as an
+        ``ErrorBarItem``, then takes log10 coordinates).
     legend : bool
         Add a legend (curves with a ``name`` appear in it).
     x_values : bool
         Label the x ticks (False for a plot whose x axis is the one of the plot below it).
     """
     pg.setConfigOptions(background="w", foreground="k", antialias=True)
-    axes = {"left": LogAxis(orientation="left")} if log_y else None
-    w = pg.PlotWidget(parent=parent, axisItems=axes)
+    axes = {}
+    if log_y:
+        axes["left"] = LogAxis(orientation="left")
+    if log_x:
+        axes["bottom"] = LogAxis(orientation="bottom")
+    w = pg.PlotWidget(parent=parent, axisItems=axes or None)
     item = w.getPlotItem()
     item.setTitle(title, size=f"{FONT_PT + 1}pt")
     style = {"font-size": f"{FONT_PT}pt"}
@@ -127,8 +150,8 @@ def make_plot(
         axis.setStyle(tickFont=_axis_font())
     fit_bottom_axis(w, values=x_values)
     item.showGrid(x=True, y=True, alpha=0.25)
-    if log_y:
-        item.setLogMode(False, True)
+    if log_x or log_y:
+        item.setLogMode(log_x, log_y)
     if legend:
         leg = item.addLegend(offset=(-8, 8), labelTextSize=f"{FONT_PT - 1}pt")
         leg.setBrush(pg.mkBrush(255, 255, 255, 200))

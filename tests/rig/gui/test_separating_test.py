@@ -12,6 +12,7 @@ import pytest
 from PySide6 import QtCore
 
 from analysis.diagnosis import compare
+from analysis.diagnosis.candidates import Location
 from analysis.measurement_file import read_measurement
 from rig.config.plans import FrequencyPlan, FrequencyRange, load_plan
 from rig.config.setup import load_setup
@@ -47,8 +48,9 @@ def first_run(tmp_path_factory, lock_dir) -> Path:
 
 
 def _candidate(label: str, model) -> SimpleNamespace:
+    place = Location(label.split(" at ")[-1])
     return SimpleNamespace(
-        candidate=SimpleNamespace(label=label),
+        candidate=SimpleNamespace(label=label, location=place),
         verified=SimpleNamespace(model_toml=model.to_toml(), parameters={}),
         rank=1,
         group=1,
@@ -81,6 +83,7 @@ def _tie(recommendation, comparison) -> SimpleNamespace:
         evidence=SimpleNamespace(findings=[]),
         screen=[],
         baseline=None,
+        readout=None,
     )
 
 
