@@ -20,6 +20,7 @@ predicted coil current exceeds the usable share of the limit for any tied candid
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -148,6 +149,14 @@ def discriminate(
     if not rows:
         raise RuntimeError("no configuration converged for every tied candidate")
     best = rows[0]
+    best["loop_check_hz"] = _loop_check_hz(
+        [
+            outputs[m, levels.index(best["level_n"]), _range_index(ranges, best)]
+            for m in range(len(models))
+        ],
+        sensors,
+        sorted({int(ch.point) for ch in data.channels} | {best["sensor"]}),
+    )
     return {
         "best": best,
         "table": rows[:n_best],
@@ -184,6 +193,31 @@ def mode_ranges(model: Model, covered: Sequence[FrequencyRange]) -> list[Frequen
         n = max(int(round((hi - lo) / step)), 1)
         out.append(FrequencyRange(round(lo, 2), round(lo + n * step, 2), round(step, 2)))
     return out
+
+
+def _range_index(ranges: Sequence[FrequencyRange], row: dict) -> int:
+    return next(i for i, r in enumerate(ranges) if r.label == row["range"])
+
+
+def _loop_check_hz(sweeps: Sequence, sensors: tuple[int, ...], used: Sequence[int]) -> float:
+    """The step of the chosen range where the plan's sensors (``used``) respond most to the
+    fundamental, the weakest of them for the weakest candidate: the rig's loop check drives
+    there at a low level and takes a sensor that hardly moves for a disconnected one (below a
+    structure's modes an accelerometer sees little), so it must run where all of them move."""
+    cols = [sensors.index(p) for p in used if p in sensors]
+    common = sweeps[0].frequency_hz if sweeps else np.zeros(0)
+    for sw in sweeps[1:]:
+        common = np.intersect1d(common, sw.frequency_hz)
+    if common.size == 0 or not cols:
+        return math.nan
+    weakest = np.full(common.size, np.inf)
+    for sw in sweeps:
+        k1 = int(np.argmin(np.abs(np.asarray(sw.order_values, float) - 1.0)))
+        rows = np.isin(sw.frequency_hz, common)
+        omega = 2 * np.pi * sw.frequency_hz[rows]
+        acc = np.abs(sw.outputs[rows, k1][:, cols]) * omega[:, None] ** 2
+        weakest = np.minimum(weakest, acc.min(axis=1))
+    return float(common[int(np.argmax(weakest))])
 
 
 def _worst_pair_power(sweeps: Sequence, sensors: tuple[int, ...], noise: NoiseModel):

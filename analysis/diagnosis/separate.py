@@ -64,6 +64,13 @@ def separating_plan(recommendation: dict, data: SteppedSineData, name: str = "se
             "phases_deg": [float(np.degrees(np.angle(r))) for r in ratio],
             "levels_n": [float(best["level_n"])],
         },
+        # the loop check where every sensor responds (the range's first step may lie below
+        # the structure's modes, where an accelerometer hardly moves at the check's level)
+        **(
+            {"pretest": {"loop_check_frequency_hz": float(best["loop_check_hz"])}}
+            if np.isfinite(best.get("loop_check_hz", np.nan))
+            else {}
+        ),
         "frequencies": {
             "direction": "up",
             "ranges": [

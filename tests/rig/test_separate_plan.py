@@ -36,6 +36,7 @@ RECOMMENDATION = {
         "stop_hz": 160.0,
         "step_hz": 1.0,
         "power": 15.4,
+        "loop_check_hz": 150.0,
     },
     "candidates": ["quadratic_damper at point 4", "quadratic_damper at point 5"],
 }
@@ -55,6 +56,8 @@ def test_the_rigs_reader_accepts_the_separating_plan(tmp_path) -> None:
     (rng,) = plan.frequencies.ranges
     assert (rng.start_hz, rng.stop_hz, rng.step_hz) == (141.0, 160.0, 1.0)
     assert "quadratic_damper at point 4" in plan.description
+    # the loop check where the sensors respond, not at the range's first step
+    assert plan.pretest.loop_check_frequency_hz == 150.0
 
 
 def test_a_fractional_order_is_written_as_the_plan_format_spells_it(tmp_path) -> None:

@@ -29,3 +29,26 @@ def test_the_separating_sensor_and_band_are_found(runs, reference_model) -> None
     best = out["best"]
     assert best["power"] > 0 and best["sensor"] in reference_model.points
     assert out["table"][0] == best and "standard errors" in out["text"]
+    # the rig's loop check runs inside the proposed range, where the sensors respond
+    assert best["start_hz"] <= best["loop_check_hz"] <= best["stop_hz"]
+
+
+def test_bands_around_the_modes_below_the_paper_ranges(reference_model) -> None:
+    """Each mode of the structure below the ranges' top that no range holds gets a band of
+    +-15 % around it (overlapping bands merged); modes inside a range get none."""
+    from analysis.diagnosis.discriminate import MODE_BAND, mode_ranges
+    from analysis.planning.candidates import PAPER_RANGES
+
+    freqs, _ = reference_model.assemble().normal_modes()
+    bands = mode_ranges(reference_model, PAPER_RANGES)
+    below = [f for f in freqs if 0 < f < PAPER_RANGES[0].start_hz]
+    assert below and bands
+    for f in below:  # each uncovered mode inside a band, with room on both sides
+        assert any(
+            b.start_hz <= (1 - 0.9 * MODE_BAND) * f
+            and f * (1 + 0.9 * MODE_BAND) <= b.stop_hz + 1e-9
+            for b in bands
+        ), f
+    for a, b in zip(bands, bands[1:], strict=False):
+        assert a.stop_hz < b.start_hz  # merged: no overlap
+    assert mode_ranges(reference_model, (FrequencyRange(0.5, 200.0, 1.0),)) == []
