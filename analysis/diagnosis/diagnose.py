@@ -733,6 +733,11 @@ def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say: Listen
         laws = _other_laws(sc.screen, sc.fits, lead.candidate, tried, run.st.n_walk)
         walk = [(f, f.values, f.known) for f in laws]
         say(StageDone("other laws", count=len(walk)))
+    _verify_walk(run, walk, jobs, ex)
+
+
+def _verify_walk(run: _Verifying, walk: list, jobs: _Jobs, ex) -> None:
+    """Verify ``[(ScreenFit, values, known)]``, each from its given values, and add them."""
     more = [
         Deferred(
             ex,
@@ -810,16 +815,7 @@ def _look_alikes(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say: Listener)
     if not walk:
         return False
     say(StageDone("look-alike places", count=len(walk)))
-    more = [
-        Deferred(
-            ex,
-            run_verify,
-            dataclasses.replace(jobs.verify(f.candidate, values, known), give_up_chi2=run.bar),
-        )
-        for f, values, known in walk
-    ]
-    run.done += [p.result() for p in more]
-    run.origin += [f for f, _, _ in walk]
+    _verify_walk(run, walk, jobs, ex)
     return _best_index(run) != lead
 
 
