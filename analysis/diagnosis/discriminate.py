@@ -149,11 +149,13 @@ def discriminate(
     if not rows:
         raise RuntimeError("no configuration converged for every tied candidate")
     best = rows[0]
+    # the loop check drives at a low level: read where the sensors move from the lowest
+    # level's sweeps (near the linear structure's response; at the plan's level a stiffening
+    # law can jump near a mode, and its unconverged steps say nothing there)
+    li = int(np.argmin(levels))
+    ri = next(i for i, r in enumerate(ranges) if r.label == best["range"])
     best["loop_check_hz"] = _loop_check_hz(
-        [
-            outputs[m, levels.index(best["level_n"]), _range_index(ranges, best)]
-            for m in range(len(models))
-        ],
+        [[outputs[m, li, ri]] for m in range(len(models))],
         sensors,
         sorted({int(ch.point) for ch in data.channels} | {best["sensor"]}),
     )
@@ -195,29 +197,37 @@ def mode_ranges(model: Model, covered: Sequence[FrequencyRange]) -> list[Frequen
     return out
 
 
-def _range_index(ranges: Sequence[FrequencyRange], row: dict) -> int:
-    return next(i for i, r in enumerate(ranges) if r.label == row["range"])
-
-
-def _loop_check_hz(sweeps: Sequence, sensors: tuple[int, ...], used: Sequence[int]) -> float:
-    """The step of the chosen range where the plan's sensors (``used``) respond most to the
-    fundamental, the weakest of them for the weakest candidate: the rig's loop check drives
-    there at a low level and takes a sensor that hardly moves for a disconnected one (below a
-    structure's modes an accelerometer sees little), so it must run where all of them move."""
+def _loop_check_hz(
+    sweeps: Sequence[Sequence], sensors: tuple[int, ...], used: Sequence[int]
+) -> float:
+    """The swept frequency (``sweeps[candidate][range]``: the plan's range) where the plan's
+    sensors (``used``) respond most to the fundamental, the weakest of them for the weakest
+    candidate. The rig's loop check drives at one frequency at a low level and takes a sensor
+    that hardly moves for a disconnected one: below a structure's modes an accelerometer sees
+    little, so the check runs where all of them move, not at the plan's first step; inside
+    the plan's range, so that the force per volt it measures holds for the first steps."""
     cols = [sensors.index(p) for p in used if p in sensors]
-    common = sweeps[0].frequency_hz if sweeps else np.zeros(0)
-    for sw in sweeps[1:]:
-        common = np.intersect1d(common, sw.frequency_hz)
-    if common.size == 0 or not cols:
+    weakest: dict[float, float] | None = None
+    for per_range in sweeps:
+        seen: dict[float, float] = {}
+        for sw in per_range:
+            if sw.frequency_hz.size == 0:
+                continue
+            k1 = int(np.argmin(np.abs(np.asarray(sw.order_values, float) - 1.0)))
+            omega = 2 * np.pi * sw.frequency_hz
+            acc = np.abs(sw.outputs[:, k1][:, cols]) * omega[:, None] ** 2
+            for f, a in zip(sw.frequency_hz.tolist(), acc.min(axis=1).tolist(), strict=True):
+                seen[f] = min(seen.get(f, math.inf), a)
+        # a frequency counts only where every candidate converged
+        weakest = (
+            seen
+            if weakest is None
+            else {f: min(a, seen[f]) for f, a in weakest.items() if f in seen}
+        )
+    finite = {f: a for f, a in (weakest or {}).items() if math.isfinite(a)}
+    if not finite or not cols:
         return math.nan
-    weakest = np.full(common.size, np.inf)
-    for sw in sweeps:
-        k1 = int(np.argmin(np.abs(np.asarray(sw.order_values, float) - 1.0)))
-        rows = np.isin(sw.frequency_hz, common)
-        omega = 2 * np.pi * sw.frequency_hz[rows]
-        acc = np.abs(sw.outputs[rows, k1][:, cols]) * omega[:, None] ** 2
-        weakest = np.minimum(weakest, acc.min(axis=1))
-    return float(common[int(np.argmax(weakest))])
+    return float(max(finite, key=lambda f: finite[f]))
 
 
 def _worst_pair_power(sweeps: Sequence, sensors: tuple[int, ...], noise: NoiseModel):

@@ -66,11 +66,7 @@ def separating_plan(recommendation: dict, data: SteppedSineData, name: str = "se
         },
         # the loop check where every sensor responds (the range's first step may lie below
         # the structure's modes, where an accelerometer hardly moves at the check's level)
-        **(
-            {"pretest": {"loop_check_frequency_hz": float(best["loop_check_hz"])}}
-            if np.isfinite(best.get("loop_check_hz", np.nan))
-            else {}
-        ),
+        **_pretest(best),
         "frequencies": {
             "direction": "up",
             "ranges": [
@@ -83,6 +79,14 @@ def separating_plan(recommendation: dict, data: SteppedSineData, name: str = "se
         },
     }
     return doc
+
+
+def _pretest(best: dict) -> dict:
+    """The plan's ``[pretest]`` table: where the loop check runs (the recommendation's
+    ``loop_check_hz``; its drive stays the plan format's)."""
+    if not np.isfinite(best.get("loop_check_hz", np.nan)):
+        return {}
+    return {"pretest": {"loop_check_frequency_hz": float(best["loop_check_hz"])}}
 
 
 def write_separating_plan(
