@@ -717,17 +717,17 @@ def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say: Listen
     points by the screen, from the best's fit, or the next laws at its unmeasured location
     (docs/diagnosis.md, the rules table)."""
     done, origin = run.done, run.origin
-    ranked = [i for i in np.argsort([v.chi2_per_dof() for v in done]) if not done[i].failed]
-    if not ranked:
+    best = _best_index(run)
+    if best is None:
         return
-    lead = origin[ranked[0]]
+    lead = origin[best]
     kind = lead.candidate.location.kind if isinstance(lead, ScreenFit) else None
-    walk_to = run.policy.walk_to(kind, FitSummary.of(done[ranked[0]]))
+    walk_to = run.policy.walk_to(kind, FitSummary.of(done[best]))
     if not walk_to:
         return
     tried = [o.candidate for o in origin]
     if walk_to == "points":
-        walk = _walk_jobs(done[ranked[0]], sc.fits, tried, run.st.n_walk)
+        walk = _walk_jobs(done[best], sc.fits, tried, run.st.n_walk)
         say(StageDone("neighbours", count=len(walk)))
     else:
         laws = _other_laws(sc.screen, sc.fits, lead.candidate, tried, run.st.n_walk)
@@ -784,6 +784,7 @@ def look_alike_places(where: Location, places) -> list[Location]:
 
 
 def _best_index(run: _Verifying) -> int | None:
+    """The index of the best verification that did not fail (None if all failed)."""
     ranked = [i for i in np.argsort([v.chi2_per_dof() for v in run.done]) if not run.done[i].failed]
     return int(ranked[0]) if ranked else None
 

@@ -155,7 +155,7 @@ def discriminate(
     li = int(np.argmin(levels))
     ri = next(i for i, r in enumerate(ranges) if r.label == best["range"])
     best["loop_check_hz"] = _loop_check_hz(
-        [[outputs[m, li, ri]] for m in range(len(models))],
+        [outputs[m, li, ri] for m in range(len(models))],
         sensors,
         sorted({int(ch.point) for ch in data.channels} | {best["sensor"]}),
     )
@@ -197,37 +197,31 @@ def mode_ranges(model: Model, covered: Sequence[FrequencyRange]) -> list[Frequen
     return out
 
 
-def _loop_check_hz(
-    sweeps: Sequence[Sequence], sensors: tuple[int, ...], used: Sequence[int]
-) -> float:
-    """The swept frequency (``sweeps[candidate][range]``: the plan's range) where the plan's
+def _loop_check_hz(sweeps: Sequence, sensors: tuple[int, ...], used: Sequence[int]) -> float:
+    """The step of the plan's range (``sweeps``: one per tied candidate) where the plan's
     sensors (``used``) respond most to the fundamental, the weakest of them for the weakest
     candidate. The rig's loop check drives at one frequency at a low level and takes a sensor
     that hardly moves for a disconnected one: below a structure's modes an accelerometer sees
     little, so the check runs where all of them move, not at the plan's first step; inside
     the plan's range, so that the force per volt it measures holds for the first steps."""
     cols = [sensors.index(p) for p in used if p in sensors]
-    weakest: dict[float, float] | None = None
-    for per_range in sweeps:
-        seen: dict[float, float] = {}
-        for sw in per_range:
-            if sw.frequency_hz.size == 0:
-                continue
-            k1 = int(np.argmin(np.abs(np.asarray(sw.order_values, float) - 1.0)))
-            omega = 2 * np.pi * sw.frequency_hz
-            acc = np.abs(sw.outputs[:, k1][:, cols]) * omega[:, None] ** 2
-            for f, a in zip(sw.frequency_hz.tolist(), acc.min(axis=1).tolist(), strict=True):
-                seen[f] = min(seen.get(f, math.inf), a)
-        # a frequency counts only where every candidate converged
-        weakest = (
-            seen
-            if weakest is None
-            else {f: min(a, seen[f]) for f, a in weakest.items() if f in seen}
-        )
-    finite = {f: a for f, a in (weakest or {}).items() if math.isfinite(a)}
-    if not finite or not cols:
+    if not cols or not sweeps:
         return math.nan
-    return float(max(finite, key=lambda f: finite[f]))
+    # a step counts only where every candidate converged
+    common = sweeps[0].frequency_hz
+    for sw in sweeps[1:]:
+        common = np.intersect1d(common, sw.frequency_hz)
+    weakest = np.full(common.size, np.inf)
+    for sw in sweeps:
+        k1 = int(np.argmin(np.abs(np.asarray(sw.order_values, float) - 1.0)))
+        rows = np.isin(sw.frequency_hz, common)
+        omega = 2 * np.pi * sw.frequency_hz[rows]
+        acc = np.abs(sw.outputs[rows, k1][:, cols]) * omega[:, None] ** 2
+        weakest = np.minimum(weakest, acc.min(axis=1))
+    ok = np.isfinite(weakest)
+    if not ok.any():
+        return math.nan
+    return float(common[ok][np.argmax(weakest[ok])])
 
 
 def _worst_pair_power(sweeps: Sequence, sensors: tuple[int, ...], noise: NoiseModel):
