@@ -64,7 +64,10 @@ class ParameterSpace:
     def to_theta(self, p: npt.ArrayLike) -> np.ndarray:
         """Scaled coordinates of physical values, shape (n,)."""
         p = np.asarray(p, dtype=float)
-        return np.where(self.log, np.log(np.abs(p) / np.abs(self.nominal)), p / self.nominal)
+        theta = p / self.nominal
+        # the logarithm only of the log-scaled ones (a linear one may well be 0)
+        theta[self.log] = np.log(np.abs(p[self.log]) / np.abs(self.nominal[self.log]))
+        return theta
 
     def to_physical(self, theta: np.ndarray) -> np.ndarray:
         """Physical values of scaled coordinates, shape (n,)."""

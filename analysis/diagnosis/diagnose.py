@@ -75,6 +75,7 @@ from analysis.diagnosis.screen import (
     ScreenFit,
     ScreenJob,
     information_criteria,
+    refine_pass,
     screen_pass,
 )
 from analysis.diagnosis.signatures import FAMILIES, Evidence, find_signatures
@@ -283,6 +284,26 @@ def _shortlist(
     return first, second[:4]
 
 
+def _refine_leaders(screen: Screen, fits: list[ScreenFit], jobs: _Jobs, ex) -> None:
+    """Refine every fit :func:`_shortlist` refines (:func:`_class_leaders`), half of them on
+    a worker meanwhile (each refinement depends only on its own fit: the same fits result
+    whichever process makes them)."""
+    nonlinear = [f for f in fits if f.candidate.law.kind not in _LINEAR_KINDS]
+    todo = {
+        f.candidate.label: f
+        for where in UNMEASURED_KINDS
+        for f in _class_leaders(nonlinear, where)
+        if not f.refined
+    }
+    fs = list(todo.values())
+    mine, theirs = (fs[0::2], fs[1::2]) if ex is not None else (fs, [])
+    later = Deferred(ex, refine_pass, jobs.screen(screen.locations, (), theirs)) if theirs else None
+    for f in mine:
+        screen.refined(f)
+    if later is not None:
+        screen.take_refined(later.result())
+
+
 def _class_leaders(fits: list[ScreenFit], where: str) -> list[ScreenFit]:
     """Every law at the best :data:`REFINED_LOCATIONS` locations of kind ``where`` (by their
     best law in the screen's first pass): a first pass can score a law there worse than the
@@ -397,6 +418,21 @@ class _Jobs:
             st.n_time,
             st.verify_evaluations,
             reweight_drop=st.reweight_drop,
+        )
+
+    def screen(self, places, candidates=(), refine=()) -> ScreenJob:
+        """A share of the screen of ``text`` at ``places``: a first pass over ``candidates``
+        or the refinement of the fits ``refine``."""
+        st = self.st
+        return ScreenJob(
+            self.text,
+            self.source,
+            self.path,
+            tuple(candidates),
+            st.n_harmonics,
+            st.n_time,
+            locations=tuple(places),
+            refine=tuple(refine),
         )
 
     def go_on(self, cand: Candidate | None, v: Verified) -> VerifyJob:
@@ -567,11 +603,8 @@ def _screen_step(
     # the screen's first pass shared with a worker; the recalibration and the linear
     # test's candidates on the workers meanwhile
     mine, theirs = (nonlinear[0::2], nonlinear[1::2]) if ex is not None else (nonlinear, [])
-    share = Deferred(
-        ex,
-        screen_pass,
-        ScreenJob(jobs.text, jobs.source, jobs.path, tuple(theirs), st.n_harmonics, st.n_time),
-    )
+    screen = _screen_from(model, data, st, pred)
+    share = Deferred(ex, screen_pass, jobs.screen(screen.locations, theirs))
     refit_job = Deferred(ex, run_verify, jobs.verify(None))
     lin_jobs = []
     if jobs.linear_run is not None:
@@ -580,7 +613,6 @@ def _screen_step(
             Deferred(ex, run_linear_job, LinearJob(jobs.text, jobs.source, jobs.linear_run, c))
             for c in [None, *lin]
         ]
-    screen = _screen_from(model, data, st, pred)
     baseline = screen.baseline()
     fits = screen.first_pass(mine, say) + (share.result() if theirs else [])
     fits = screen.refine(fits, st.n_refine, say)
@@ -607,6 +639,7 @@ def _screen_step(
             )
         ]
     t2 = time.perf_counter()
+    _refine_leaders(screen, fits, jobs, ex)
     first, second = _shortlist(screen, fits, evidence, st.n_verify, baseline.bic)
     timings["shortlist_s"] = time.perf_counter() - t2
     lin_base, lin_fits = _linear_results(lin_jobs, say)
@@ -645,6 +678,7 @@ def _screen_again(
     sc.screen = _screen_from(Model.from_toml_text(jobs.text, jobs.source), data, st)
     sc.baseline = sc.screen.baseline()
     sc.fits = sc.screen.run(sc.nonlinear, st.n_refine, say, ex)
+    _refine_leaders(sc.screen, sc.fits, jobs, ex)
     sc.first, sc.second = _shortlist(sc.screen, sc.fits, evidence, st.n_verify, sc.baseline.bic)
     result.screen, result.baseline, result.rescreened = sc.fits, sc.baseline, True
     result.timings["rescreen_s"] = time.perf_counter() - t3

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import logging
 import math
 from collections.abc import Sequence
@@ -61,7 +62,7 @@ from analysis.diagnosis.candidates import (
 from analysis.elements import make_element
 from analysis.events import Listener, UnitDone
 from analysis.measurement_file import SteppedSineData
-from analysis.mhb.aft import element_forces
+from analysis.mhb.aft import element_forces_batch
 from analysis.mhb.harmonics import HarmonicBasis
 from analysis.model import Model
 from analysis.predict_branches import BranchMatchedPredictor
@@ -73,6 +74,7 @@ __all__ = [
     "ScreenFit",
     "ScreenJob",
     "information_criteria",
+    "refine_pass",
     "screen_pass",
 ]
 
@@ -226,6 +228,7 @@ class _States:
     g: np.ndarray | None = None  # (n, K, nL) forces on the structure [N, or N m]
     Pg: np.ndarray | None = None  # (n, K, nL, C) d g / d (weighted data)
     S0: np.ndarray | None = None
+    first: tuple | None = None  # the model's elements' part of the first system
     X_init: np.ndarray | None = None
     maps: dict = field(default_factory=dict)
     known: dict = field(default_factory=dict)
@@ -431,7 +434,7 @@ class Screen:
         for kk, h in enumerate(bs.order_k):
             R = fr.R[:, h]  # (n, nD, 1 + nD)
             Rd = R[:, :, 0]
-            RL = np.einsum("nij,lj->nil", R[:, :, 1:], Lam)
+            RL = R[:, :, 1:] @ Lam.T
             if grouped:
                 shape = np.einsum("nj,lj->nl", fr.X0[:, h], B_loc)
                 shape /= np.maximum(np.linalg.norm(shape, axis=1, keepdims=True), 1e-300)
@@ -443,11 +446,11 @@ class Screen:
             y = Y[:, kk] - Rd[:, :C] * self._F[self.rows, kk][:, None]
             Aw = A * W[:, kk, :, None]
             pinv = np.linalg.pinv(Aw, rcond=self.rcond)  # (n, nL, C)
-            g = np.einsum("nlc,nc->nl", pinv, y * W[:, kk])
+            g = (pinv @ (y * W[:, kk])[:, :, None])[:, :, 0]
             ghat.append(g)
             Pg.append(pinv)
-            out_U[:, kk] = Rd * self._F[self.rows, kk][:, None] + np.einsum("nil,nl->ni", RL, g)
-            P_rows.append(np.einsum("nil,nlc->nic", RL, pinv))  # complex (n, nD, C)
+            out_U[:, kk] = Rd * self._F[self.rows, kk][:, None] + (RL @ g[:, :, None])[:, :, 0]
+            P_rows.append(RL @ pinv)  # complex (n, nD, C)
         st = _States(
             out_U,
             np.stack(P_rows, axis=1),
@@ -616,6 +619,7 @@ class Screen:
                 self.predictor.settings["n_harmonics"],
                 self.predictor.settings["n_time"],
                 self.free,
+                self.locations,
             )
             later = executor.submit(screen_pass, job)
             cands = cands[0::2]
@@ -649,6 +653,12 @@ class Screen:
             if progress:
                 progress(UnitDone("refine", i + 1, n_refine, f.candidate.label))
         return sorted(fits, key=lambda f: f.bic)
+
+    def take_refined(self, fits: Sequence[ScreenFit]) -> None:
+        """Keep refinements made by another process's screen of the same model and file
+        (:func:`refine_pass`): :meth:`refined` returns them."""
+        for f in fits:
+            self._refined[f.candidate.label] = f
 
     def refined(self, f: ScreenFit) -> ScreenFit:
         """``f`` with the alternations at its clearance, or ``f`` if that is no better."""
@@ -750,17 +760,19 @@ class Screen:
         u_s = element.switch_threshold()[0]
         span = np.ptp(u, axis=1) + 1e-300
         idle = np.all(ev.f == 0, axis=1) & (np.abs(u - u_s).min(axis=1) > 0.05 * span)
-        for i in range(n):
-            for j in range(m):
-                if idle[i, j]:
-                    continue
-                Ue = hb.from_complex(X_inc[i, :, j])
-                F, D, dFp = element_forces(hb, element, Ue, fr.omega[i], True, linear is not None)
-                f[i, :, j] = hb.to_complex(F)
-                Jm[i, j] = D[np.ix_(idx, idx)]
-                if linear is not None:
-                    for p in linear:
-                        basis[p][i, :, j] = hb.to_complex(dFp[:, names.index(p)])
+        for j in range(m):
+            act = np.flatnonzero(~idle[:, j])
+            if not act.size:
+                continue
+            Ue = hb.from_complex(X_inc[act, :, j].T).T  # (steps, 2H+1)
+            F, D, dFp = element_forces_batch(
+                hb, element, Ue, fr.omega[act], True, linear is not None
+            )
+            f[act, :, j] = hb.to_complex(F.T).T
+            Jm[act, j] = D[:, idx][:, :, idx]
+            if linear is not None:
+                for p in linear:
+                    basis[p][act, :, j] = hb.to_complex(dFp[:, :, names.index(p)].T).T
         return f, Jm, basis
 
     def _linear_law(self, fr, law, X, theta, want_basis):
@@ -817,8 +829,7 @@ class Screen:
         """Alternate: whitening and unmeasured harmonics at the current values, then the
         linear least squares of every linear parameter. Returns (rss, n, values, known)."""
         params = tuple(dict.fromkeys(([param] if param else []) + list(self.free)))
-        bs = self._basis
-        C, K = self.n_channels, bs.order_k.size
+        C, K = self.n_channels, self._basis.order_k.size
         n = self.rows.size
         X = self._initial_states(fr, st)
         law = None if cand is None or cand.law.kind == "none" else cand.law
@@ -829,58 +840,63 @@ class Screen:
         if joint:
             theta["k_joint_delta"] = 0.0
         known = {mp: el.params[ep] for el, _, _, pmap in fr.known for mp, ep in pmap.items()}
-        W = st.W
-        Wr = np.stack([W, W], axis=2).reshape(n, -1)  # (n, 2KC)
         drive = fr.R_o[:, :, :C, 0] * self._F[self.rows][:, :, None]
-        other = bs.other
         incid = _incidences(fr, law, joint, B_loc)
-        # per incidence: response at the sensors to a unit force (real) and state map
-        maps = st.maps
         rss = np.inf
         its = self.n_iterations if n_iterations is None else n_iterations
         for it in range(its + 1):
-            # at the data's states the candidate's coefficients start at zero, so its force
-            # and Jacobian vanish and the whitening is the model's own elements': computed
-            # once per location, shared by every law there
-            whitened = it == 0 and st.S0 is not None
-            lin = _Forces(
-                np.zeros((n, bs.H + 1, len(fr.dofs)), complex),
-                None if whitened else np.zeros((n, 2 * K * C, 2 * K * C)),
-            )
-            for i, (kind_, law_i, rows, pmap) in enumerate(incid):
-                Xi = X @ rows.T
-                if kind_ == "known":
-                    f, Jm = self._known_force(fr, st, i, law_i, Xi, rows, pmap, known, it, lin)
-                else:
-                    f, Jm = self._candidate_force(fr, Xi, rows, law, joint, theta, it, lin)
-                lin.g += f @ rows
-                if whitened or (it == 0 and kind_ == "cand"):
-                    continue
-                for j, row in enumerate(rows):
-                    Rr, Pr = self._state_map(fr, st, maps, row)
-                    lin.M += Rr @ Jm[:, j] @ Pr
-            if it > 0 and other.size:
-                # unmeasured harmonics follow the laws: U_h = R_DD(h W) g_h
-                X[:, other] = np.einsum("nhij,nhj->nhi", fr.R[:, other, :, 1:], lin.g[:, other])
-            if whitened:
-                S = st.S0
+            if it == 0 and st.S0 is not None and not params:
+                # at the data's states the candidate's coefficients start at zero, so its
+                # force and Jacobian vanish and the whitening is the model's own elements':
+                # computed once per location, shared by every law there
+                lin, Am, y0 = self._first_system(fr, st, X, incid, law, joint, theta, known, drive)
             else:
-                lin.M *= Wr[:, :, None]
-                S = np.linalg.inv(np.eye(2 * K * C)[None] - lin.M)
-                if it == 0:
-                    st.S0 = S
-            Am, y0 = self._whitened_system(fr, st, S, W, drive, lin, params)
-            cur = np.array(
-                [
-                    known[nm] if kd == "known" else theta.get(nm, 0.0) if kd == "cand" else 0.0
-                    for kd, nm in lin.names
-                ]
-            )
-            x, rss = _bounded_lsq(Am, y0 + Am @ cur, np.array(lin.lower, float))
+                lin, Am, y0 = self._iteration(
+                    fr, st, X, incid, law, joint, theta, known, drive, it, params
+                )
+            x, rss = _bounded_lsq(Am, y0 + Am @ _current(lin.names, known, theta), lin.lower)
             _take_values(lin.names, x, known, theta)
-            if it == its:
-                break
         return rss, 2 * K * C * n, theta, known
+
+    def _iteration(self, fr, st, X, incid, law, joint: bool, theta, known, drive, it: int, params):
+        """One alternation at the current values: the laws' forces, the unmeasured harmonics
+        (updated in ``X``) and the whitening at them. Returns ``(forces, matrix, right-hand
+        side)`` of the least squares."""
+        bs = self._basis
+        C, K = self.n_channels, bs.order_k.size
+        n = self.rows.size
+        whitened = it == 0 and st.S0 is not None
+        lin = _Forces(
+            np.zeros((n, bs.H + 1, len(fr.dofs)), complex),
+            None if whitened else np.zeros((n, 2 * K * C, 2 * K * C)),
+        )
+        for i, (kind_, law_i, rows, pmap) in enumerate(incid):
+            Xi = X @ rows.T
+            if kind_ == "known":
+                f, Jm = self._known_force(fr, st, i, law_i, Xi, rows, pmap, known, it, lin)
+            else:
+                f, Jm = self._candidate_force(fr, Xi, rows, law, joint, theta, it, lin)
+            lin.g += f @ rows
+            if whitened or (it == 0 and kind_ == "cand"):
+                continue
+            for j, row in enumerate(rows):
+                Rr, Pr = self._state_map(fr, st, st.maps, row)
+                lin.M += Rr @ Jm[:, j] @ Pr
+        other = bs.other
+        if it > 0 and other.size:
+            # unmeasured harmonics follow the laws: U_h = R_DD(h W) g_h
+            X[:, other] = np.einsum("nhij,nhj->nhi", fr.R[:, other, :, 1:], lin.g[:, other])
+        if not whitened:
+            Wr = np.stack([st.W, st.W], axis=2).reshape(n, -1)  # (n, 2KC)
+            lin.M *= Wr[:, :, None]
+            A = np.eye(2 * K * C)[None] - lin.M
+            if it == 0:
+                st.S0 = np.linalg.inv(A)  # kept: every law at the location starts here
+                whitened = True
+        # (I - M)^-1 applied: the stored inverse, or a solve for this iterate alone
+        S = st.S0 if whitened else functools.partial(np.linalg.solve, A)
+        Am, y0 = self._whitened_system(fr, st, S, st.W, drive, lin, params)
+        return lin, Am, y0
 
     def _state_map(self, fr: _Frame, st: _States, maps: dict, row: np.ndarray):
         """Response at the sensors to a unit force at an incidence, and its state map."""
@@ -909,9 +925,12 @@ class Screen:
             lin.lower.append(-np.inf if ep == "gap" else 0.0)
         return f, Jm
 
-    def _candidate_force(self, fr, Xi, rows, law, joint: bool, theta: dict, it: int, lin):
-        """The candidate's force and Jacobian (its law's, and a joint's spring change); its
-        linear parameters' columns added to ``lin``."""
+    def _candidate_force(
+        self, fr, Xi, rows, law, joint: bool, theta: dict, it: int, lin, local: bool = False
+    ):
+        """The candidate's force and Jacobian (its law's, and a joint's spring change) at its
+        incidences; its linear parameters' columns added to ``lin`` (on every DOF, or at the
+        incidences: ``local``)."""
         K = self._basis.order_k.size
         f = np.zeros_like(Xi)
         Jm = np.zeros((self.rows.size, rows.shape[0], 2 * K, 2 * K))
@@ -920,29 +939,71 @@ class Screen:
             f, Jm_c, basis = self._law_eval(fr, law, Xi, th, True, it > 0)
             Jm = Jm if Jm_c is None else Jm_c
             for p in law.linear:
-                lin.columns.append(basis[p] @ rows)
+                lin.columns.append(basis[p] if local else basis[p] @ rows)
                 lin.names.append(("cand", p))
                 lin.lower.append(0.0 if p in law.nonnegative else -np.inf)
         if joint:
             sp = Law("linear_spring")
             fs, Js, bsp = self._law_eval(fr, sp, Xi, {"k": theta["k_joint_delta"]}, True)
             f, Jm = f + fs, Jm + Js
-            lin.columns.append(bsp["k"] @ rows)
+            lin.columns.append(bsp["k"] if local else bsp["k"] @ rows)
             lin.names.append(("cand", "k_joint_delta"))
             lin.lower.append(-np.inf)
         return f, Jm
 
+    def _first_system(self, fr, st, X, incid, law, joint: bool, theta, known, drive):
+        """:meth:`_whitened_system` at the data's states without free parameters, where the
+        model's elements' part (their forces, columns and the data's residual) is the same for
+        every law at the location: computed once, only the candidate's columns added. Returns
+        ``(forces with the names and bounds, matrix, right-hand side)``."""
+        if st.first is None:
+            lk = _Forces(np.zeros((self.rows.size, self._basis.H + 1, len(fr.dofs)), complex), None)
+            for i, (kind_, element, rows, pmap) in enumerate(incid):
+                if kind_ == "known":
+                    f, _ = self._known_force(
+                        fr, st, i, element, X @ rows.T, rows, pmap, known, 0, lk
+                    )
+                    lk.g += f @ rows
+            Ro = fr.R_o[:, :, : self.n_channels, 1:]
+            r = self._responses(Ro, st.W, lk.g, lk.columns, st.Y - drive)
+            st.first = (_whiten(st.S0, r), tuple(lk.names), tuple(lk.lower))
+        Zk, names, lower = st.first
+        lc = _Forces(np.zeros((0,)), None, [], list(names), list(lower))
+        rows = next((rows for kind_, _, rows, _ in incid if kind_ == "cand"), None)
+        if rows is None:
+            Z = Zk
+        else:
+            # the candidate's forces and columns at its incidences, responding through them
+            f, _ = self._candidate_force(fr, X @ rows.T, rows, law, joint, theta, 0, lc, True)
+            key = ("incidence", rows.tobytes())
+            if key not in st.maps:
+                C = self.n_channels
+                st.maps[key] = np.einsum("nkcd,md->nkcm", fr.R_o[:, :, :C, 1:], rows)
+            Zc = _whiten(st.S0, self._responses(st.maps[key], st.W, f, lc.columns))
+            Z = np.concatenate([Zk, Zc[:, :, 1:]], axis=2)
+            Z[:, :, 0] += Zc[:, :, 0]
+        return lc, Z[:, :, 1:].reshape(-1, Z.shape[2] - 1), Z[:, :, 0].ravel()
+
+    def _responses(self, R, W, g, columns, data=None) -> np.ndarray:
+        """Weighted responses at the sensors (n, K, C, 1 + columns) at the measured orders,
+        through ``R`` (n, K, C, d) from forces on d places: first the residual of ``data``
+        (minus the response alone without) to the forces ``g``, then the response to each
+        column."""
+        ok = self._basis.order_k
+        cols = np.stack([g[:, ok], *(c[:, ok] for c in columns)], -1)
+        r = np.matmul(R, cols) * W[..., None]
+        r[..., 0] = (0.0 if data is None else data * W) - r[..., 0]
+        return r
+
     def _whitened_system(self, fr, st, S, W, drive, lin: _Forces, params):
         """The data's residual and each column's response at the sensors, whitened at once
-        (the free parameters' derivatives appended to ``lin``); returns the least-squares
-        matrix and right-hand side at zero change."""
+        (the free parameters' derivatives appended to ``lin``; ``S`` the whitening or a
+        function applying it); returns the least-squares matrix and right-hand side at zero
+        change."""
         bs = self._basis
-        C, K = self.n_channels, bs.order_k.size
-        n = self.rows.size
-        Ro = fr.R_o[:, :, :C, 1:]
-        cols = np.stack([lin.g[:, bs.order_k], *(c[:, bs.order_k] for c in lin.columns)], -1)
-        r = np.matmul(Ro, cols) * W[..., None]  # (n, K, C, 1 + columns)
-        r[..., 0] = (st.Y - drive) * W - r[..., 0]
+        r = self._responses(
+            fr.R_o[:, :, : self.n_channels, 1:], W, lin.g, lin.columns, st.Y - drive
+        )
         fo = np.concatenate([self._F[self.rows][:, :, None], lin.g[:, bs.order_k]], axis=2)
         extra = []
         for name in params:
@@ -952,13 +1013,26 @@ class Screen:
             lin.lower.append(-np.inf)
         if extra:
             r = np.concatenate([r, np.stack(extra, -1)], axis=-1)
-        q = r.shape[-1]
-        # real coefficients in the order of _vec: (order, cos/sin, channel)
-        V = np.stack([r.real, -r.imag], axis=2).reshape(n, 2 * K * C, q)
-        Z = np.matmul(S, V)
-        y0 = Z[:, :, 0].ravel()
-        Am = Z[:, :, 1:].reshape(n * 2 * K * C, q - 1)
-        return Am, y0
+        Z = _whiten(S, r)
+        return Z[:, :, 1:].reshape(-1, Z.shape[2] - 1), Z[:, :, 0].ravel()
+
+
+def _whiten(S, r: np.ndarray) -> np.ndarray:
+    """``S`` (a matrix per step, or a function applying one) on the real coefficients of the
+    responses ``r`` (n, K, C, q), in the order of :func:`_vec`: (n, 2KC, q)."""
+    n, K, C, q = r.shape
+    V = np.stack([r.real, -r.imag], axis=2).reshape(n, 2 * K * C, q)
+    return S(V) if callable(S) else np.matmul(S, V)
+
+
+def _current(names, known: dict, theta: dict) -> np.ndarray:
+    """The least squares' unknowns at their current values (a change is at zero)."""
+    return np.array(
+        [
+            known[nm] if kd == "known" else theta.get(nm, 0.0) if kd == "cand" else 0.0
+            for kd, nm in names
+        ]
+    )
 
 
 @dataclass
@@ -1003,7 +1077,10 @@ def _take_values(names, x, known: dict, theta: dict) -> None:
 
 @dataclass(frozen=True)
 class ScreenJob:
-    """A share of a screen's first pass, to run on an executor (:func:`screen_pass`)."""
+    """A share of a screen, to run on an executor: the first pass over ``candidates``
+    (:func:`screen_pass`) or the alternations of the fits ``refine`` (:func:`refine_pass`).
+    ``locations`` are the screen's places (default: the candidates'); jobs with the same
+    model, file and places share one screen in a worker process."""
 
     model_toml: str
     source: str
@@ -1012,28 +1089,49 @@ class ScreenJob:
     n_harmonics: int = 9
     n_time: int = 128
     free_parameters: tuple[str, ...] = ()
+    locations: tuple[Location, ...] = ()
+    refine: tuple[ScreenFit, ...] = ()
 
 
 def screen_pass(job: ScreenJob) -> list[ScreenFit]:
     """The first pass of a screen over ``job.candidates`` (top level, for executors)."""
+    return _job_screen(job).first_pass(job.candidates)
+
+
+def refine_pass(job: ScreenJob) -> list[ScreenFit]:
+    """``job.refine`` through the screen's alternations (:meth:`Screen.refined`; top level,
+    for executors)."""
+    screen = _job_screen(job)
+    return [screen.refined(f) for f in job.refine]
+
+
+def _job_screen(job: ScreenJob) -> Screen:
+    """The screen of a job, kept for the next job of the same screen in this process (its
+    receptances and force estimates are most of a small job's work)."""
+    places = job.locations or tuple(c.location for c in job.candidates)
+    key: tuple = (job.model_toml, job.source, job.data_path, job.n_harmonics, job.n_time)
+    key = (*key, places, job.free_parameters)
+    if _JOB_SCREEN and _JOB_SCREEN[0] == key:
+        return _JOB_SCREEN[1]
     from analysis.measurement_file import read_measurement
 
     model = Model.from_toml_text(job.model_toml, job.source)
     data = read_measurement(job.data_path)
     pred = BranchMatchedPredictor(model, data, n_harmonics=job.n_harmonics, n_time=job.n_time)
     screen = Screen(
-        model,
-        data,
-        predictor=pred,
-        free_parameters=job.free_parameters,
-        locations=tuple(c.location for c in job.candidates),
+        model, data, predictor=pred, free_parameters=job.free_parameters, locations=places
     )
-    return screen.first_pass(job.candidates)
+    _JOB_SCREEN[:] = [key, screen]  # one at a time: a screen's receptances are large
+    return screen
+
+
+_JOB_SCREEN: list = []
 
 
 def _bounded_lsq(A: np.ndarray, y: np.ndarray, lower: np.ndarray):
     """Least squares ``min |y - A x|`` with ``x >= lower``: the unconstrained solution when it
     satisfies the bounds (then it is the bounded one: the problem is convex), else BVLS."""
+    lower = np.asarray(lower, dtype=float)
     if A.shape[1] == 0:
         return np.zeros(0), float(y @ y)
     s = np.linalg.norm(A, axis=0)

@@ -24,7 +24,7 @@ from numba import njit
 
 from analysis.mhb.harmonics import HarmonicBasis
 
-__all__ = ["element_forces", "nonlinear_forces", "parameter_forces"]
+__all__ = ["element_forces", "element_forces_batch", "nonlinear_forces", "parameter_forces"]
 
 _NONE = np.zeros((0, 0))  # a derivative not wanted (the kernels skip size-0 arrays)
 _NO_PARAMS = np.zeros(0)
@@ -168,6 +168,62 @@ def _jump_sides(u_t, v_t, idx, up, u_s, omega_b):
 
 
 @njit(cache=True)
+def _locate_jumps_batch(tau, k, U, u_t, v_t, u_s, omega_b):
+    """:func:`_locate_jumps` and :func:`_jump_sides` of many states: the crossings of all
+    of them in one list (``start[i]:start[i + 1]`` are state ``i``'s), with the displacement
+    and velocity just after (``u_hi``, ``v``) and just before (``u_lo``) each."""
+    n, N = U.shape[0], tau.size
+    found = []
+    start = np.zeros(n + 1, np.int64)
+    for i in range(n):
+        found.append(_locate_jumps(tau, k, U[i], u_t[i], u_s))
+        start[i + 1] = start[i] + found[i][0].size
+    total = start[n]
+    idx = np.empty(total, np.int64)
+    t = np.empty(total)
+    rows = np.empty((2, total, U.shape[1]))
+    up = np.empty(total)
+    upp = np.empty(total)
+    u_hi = np.empty(total)
+    u_lo = np.empty(total)
+    vel = np.empty(total)
+    for i in range(n):
+        a, b = start[i], start[i + 1]
+        if a == b:
+            continue
+        idx_i, t_i, rows_i, up_i, upp_i = found[i]
+        idx[a:b], t[a:b], rows[:, a:b], up[a:b], upp[a:b] = idx_i, t_i, rows_i, up_i, upp_i
+        u, v = _jump_sides(u_t[i], v_t[i], idx_i, up_i, u_s, omega_b[i])
+        u_hi[a:b], u_lo[a:b], vel[a:b] = u[N : N + b - a], u[N + b - a :], v[N : N + b - a]
+    return start, idx, t, rows, up, upp, u_hi, u_lo, vel
+
+
+@njit(cache=True)
+def _add_jumps_batch(w, start, rows, up, upp, offset, J, dJ_dvel, dJ_dp, dus_dp, F, D, dFp):
+    """:func:`_add_jumps` of many states (crossings as :func:`_locate_jumps_batch` lists
+    them) into ``F`` (n, s), ``D`` (n, s, s) and ``dFp`` (n, s, p); a derivative not wanted
+    has shape (n, 0, 0)."""
+    for i in range(start.size - 1):
+        a, b = start[i], start[i + 1]
+        if a == b:
+            continue
+        _add_jumps(
+            w,
+            rows[:, a:b],
+            up[a:b],
+            upp[a:b],
+            offset[a:b],
+            J[a:b],
+            dJ_dvel[a:b],
+            dJ_dp[a:b],
+            dus_dp,
+            F[i],
+            D[i],
+            dFp[i],
+        )
+
+
+@njit(cache=True)
 def _compiled_forces(law, p, EdE, P, E, dE, tau, k, jw, Ue, omega_b, u_s, dus_dp, D):
     """:func:`element_forces` without parameter derivatives for a law compiled with numba
     (``u_s`` NaN: no jump), in one call; ``D`` (zeroed) receives ``dF/dUe`` unless of size 0."""
@@ -251,44 +307,87 @@ def element_forces(
             _NONE if D is None else D,
         )
         return F, D, None
-    N = b.n_time
-    uv = b.EdE @ Ue
-    u_t, v_t = uv[:N], omega_b * uv[N:]
+    F, D, dFp = element_forces_batch(
+        b, element, np.asarray(Ue, dtype=float)[None], np.array([omega_b]), jacobian, want_params
+    )
+    return F[0], None if D is None else D[0], None if dFp is None else dFp[0]
+
+
+def element_forces_batch(
+    b: HarmonicBasis,
+    element,
+    U: np.ndarray,
+    omega_b: np.ndarray,
+    jacobian: bool = True,
+    want_params: bool = False,
+):
+    """:func:`element_forces` of one element at many states at once (the law evaluated on
+    every state's samples and jump sides in one call, the projections as batched products):
+    what a screen of many steps needs, where a loop over the steps spends its time in the
+    calls.
+
+    Parameters
+    ----------
+    b : HarmonicBasis
+    element : NonlinearElement
+    U : ndarray, shape (n, 2H+1)
+        Coefficients of the element's relative displacement at each state [m].
+    omega_b : ndarray, shape (n,)
+        Base angular frequency of each state [rad/s].
+
+    Returns
+    -------
+    F : ndarray, shape (n, 2H+1)
+    D : ndarray, shape (n, 2H+1, 2H+1) or None
+    dFp : ndarray, shape (n, 2H+1, n_params) or None
+    """
+    U = np.ascontiguousarray(U, dtype=float)
+    omega_b = np.asarray(omega_b, dtype=float)
+    n, N = U.shape[0], b.n_time
+    uv = U @ b.EdE.T
+    u_t, v_t = uv[:, :N], omega_b[:, None] * uv[:, N:]
+    sw = element.switch_threshold()
     nc = 0
     if sw is not None:
         u_s, dus_dp = sw
-        idx, t, rows, up, upp = _locate_jumps(b.tau, b.k, Ue, u_t, u_s)
+        start, idx, t, rows, up, upp, u_hi, u_lo, vel = _locate_jumps_batch(
+            b.tau, b.k, U, u_t, v_t, float(u_s), omega_b
+        )
         nc = idx.size
-        if nc:
-            # the samples and both sides of every jump in one evaluation
-            after = np.where(u_t[(idx + 1) % N] > u_s, 1.0, -1.0)
-            eps = 1e-9 * max(abs(u_s), np.abs(u_t).max(), 1e-300)
-            vs = omega_b * up
-            u_t = np.concatenate([u_t, u_s + after * eps, u_s - after * eps])
-            v_t = np.concatenate([v_t, vs, vs])
-    ev = element.evaluate(u_t, v_t, want_params)
-    D = np.zeros((b.size, b.size)) if jacobian else None
-    F = _project(
-        b.P, b.E, b.dE, ev.f[:N], ev.df_du[:N], omega_b * ev.df_dv[:N], _NONE if D is None else D
-    )
-    dFp = (b.P @ ev.df_dp[:, :N].T) if want_params else None
-    if nc == 0:
-        return F, D, dFp
-    hi, lo = slice(N, N + nc), slice(N + nc, N + 2 * nc)
-    _add_jumps(
-        b.jump_weights,
-        rows,
-        up,
-        upp,
-        t - (b.tau[idx] + np.pi / N),  # from the cell boundary the sum assumes
-        ev.f[hi] - ev.f[lo],
-        omega_b * (ev.df_dv[hi] - ev.df_dv[lo]),
-        (ev.df_dp[:, hi] - ev.df_dp[:, lo]).T if want_params else _NONE,
-        np.asarray(dus_dp, dtype=float),
-        F,
-        _NONE if D is None else D,
-        _NONE if dFp is None else dFp,
-    )
+    # the samples and both sides of every jump in one evaluation
+    u_all = np.concatenate([u_t.ravel(), u_hi, u_lo]) if nc else u_t.ravel()
+    v_all = np.concatenate([v_t.ravel(), vel, vel]) if nc else v_t.ravel()
+    ev = element.evaluate(u_all, v_all, want_params)
+    nN = n * N
+    f = ev.f[:nN].reshape(n, N)
+    F = f @ b.P.T
+    D = None
+    if jacobian:
+        du = ev.df_du[:nN].reshape(n, 1, N)
+        dv = (omega_b[:, None] * ev.df_dv[:nN].reshape(n, N))[:, None, :]
+        D = (b.P[None] * du) @ b.E + (b.P[None] * dv) @ b.dE
+    dFp = None
+    if want_params:
+        dp = ev.df_dp[:, :nN].reshape(-1, n, N)
+        dFp = np.ascontiguousarray(np.einsum("sm,pnm->nsp", b.P, dp))
+    if nc:
+        hi, lo = slice(nN, nN + nc), slice(nN + nc, nN + 2 * nc)
+        step = np.repeat(np.arange(n), np.diff(start))
+        _add_jumps_batch(
+            b.jump_weights,
+            start,
+            rows,
+            up,
+            upp,
+            t - (b.tau[idx] + np.pi / N),  # from the cell boundary the sum assumes
+            ev.f[hi] - ev.f[lo],
+            omega_b[step] * (ev.df_dv[hi] - ev.df_dv[lo]),
+            np.ascontiguousarray((ev.df_dp[:, hi] - ev.df_dp[:, lo]).T) if want_params else _NONE,
+            np.asarray(dus_dp, dtype=float),
+            F,
+            np.zeros((n, 0, 0)) if D is None else D,
+            np.zeros((n, 0, 0)) if dFp is None else dFp,
+        )
     return F, D, dFp
 
 

@@ -136,3 +136,30 @@ def test_compiled_law_is_the_array_law():
             assert a.shape == u.shape
             np.testing.assert_allclose(a, r, rtol=1e-15, atol=0.0)
         assert el.evaluate(np.float64(-1e-3), np.float64(0.1)).f.shape == ()
+
+
+def test_many_states_at_once_equal_each_state_alone():
+    """The batched evaluation (a screen's steps) against the one-state path, state by state:
+    states in and out of contact, with and without jumps, at different frequencies; forces,
+    Jacobians and parameter derivatives equal to rounding (1e-12 of each's largest)."""
+    from analysis.mhb.aft import element_forces_batch
+
+    el = make_element("hertz_contact", **JUMPY)
+    b = HarmonicBasis(9, 128)
+    rng = np.random.default_rng(3)
+    scales = np.array([0.0, 0.3, 1.0, 1.7, 2.5])  # 0: at rest, far from the stop
+    U = np.array([s * _motion() + 1e-5 * rng.standard_normal(19) * s for s in scales])
+    omega = OMEGA_B * np.array([0.8, 0.9, 1.0, 1.1, 1.3])
+    F, D, dFp = element_forces_batch(b, el, U, omega, True, True)
+    for i in range(len(scales)):
+        Fi, Di, dFpi = element_forces(b, el, U[i], omega[i], True, True)
+        np.testing.assert_allclose(F[i], Fi, rtol=0, atol=1e-12 * max(np.abs(Fi).max(), 1e-300))
+        np.testing.assert_allclose(D[i], Di, rtol=0, atol=1e-12 * max(np.abs(Di).max(), 1e-300))
+        np.testing.assert_allclose(
+            dFp[i], dFpi, rtol=0, atol=1e-12 * max(np.abs(dFpi).max(), 1e-300)
+        )
+        # the compiled one-state path the balance uses, forces and Jacobian
+        Fc, Dc, _ = element_forces(b, el, U[i], omega[i], True)
+        np.testing.assert_allclose(F[i], Fc, rtol=0, atol=1e-10 * max(np.abs(Fc).max(), 1e-300))
+        np.testing.assert_allclose(D[i], Dc, rtol=0, atol=1e-10 * max(np.abs(Dc).max(), 1e-300))
+    assert np.abs(F[0]).max() == 0.0 and np.abs(F[-1]).max() > 0.0
