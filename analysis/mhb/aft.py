@@ -152,6 +152,17 @@ def _project(P, E, dE, f, df_du, df_dv, D):
 
 
 @njit(cache=True)
+def _project_batch(P, E, dE, f, df_du, df_dv, D):
+    """:func:`_project` of many states: ``f``, ``df_du``, ``df_dv`` of shape (n, N), ``D``
+    of shape (n, s, s), or (n, 0, 0) when not wanted. Returns ``F`` (n, s)."""
+    n = f.shape[0]
+    F = np.empty((n, P.shape[0]))
+    for i in range(n):
+        F[i] = _project(P, E, dE, f[i], df_du[i], df_dv[i], D[i])
+    return F
+
+
+@njit(cache=True)
 def _jump_sides(u_t, v_t, idx, up, u_s, omega_b):
     """The samples followed by both sides of every jump (just after, then just before the
     crossing ``idx``), to evaluate the law at all of them at once."""
@@ -171,7 +182,8 @@ def _jump_sides(u_t, v_t, idx, up, u_s, omega_b):
 def _locate_jumps_batch(tau, k, U, u_t, v_t, u_s, omega_b):
     """:func:`_locate_jumps` and :func:`_jump_sides` of many states: the crossings of all
     of them in one list (``start[i]:start[i + 1]`` are state ``i``'s), with the displacement
-    and velocity just after (``u_hi``, ``v``) and just before (``u_lo``) each."""
+    and velocity just after (``u_hi``, ``v``) and just before (``u_lo``) each, and its
+    state's base frequency (``om``)."""
     n, N = U.shape[0], tau.size
     found = []
     start = np.zeros(n + 1, np.int64)
@@ -187,6 +199,7 @@ def _locate_jumps_batch(tau, k, U, u_t, v_t, u_s, omega_b):
     u_hi = np.empty(total)
     u_lo = np.empty(total)
     vel = np.empty(total)
+    om = np.empty(total)
     for i in range(n):
         a, b = start[i], start[i + 1]
         if a == b:
@@ -195,7 +208,8 @@ def _locate_jumps_batch(tau, k, U, u_t, v_t, u_s, omega_b):
         idx[a:b], t[a:b], rows[:, a:b], up[a:b], upp[a:b] = idx_i, t_i, rows_i, up_i, upp_i
         u, v = _jump_sides(u_t[i], v_t[i], idx_i, up_i, u_s, omega_b[i])
         u_hi[a:b], u_lo[a:b], vel[a:b] = u[N : N + b - a], u[N + b - a :], v[N : N + b - a]
-    return start, idx, t, rows, up, upp, u_hi, u_lo, vel
+        om[a:b] = omega_b[i]
+    return start, idx, t, rows, up, upp, u_hi, u_lo, vel, om
 
 
 @njit(cache=True)
@@ -350,7 +364,7 @@ def element_forces_batch(
     nc = 0
     if sw is not None:
         u_s, dus_dp = sw
-        start, idx, t, rows, up, upp, u_hi, u_lo, vel = _locate_jumps_batch(
+        start, idx, t, rows, up, upp, u_hi, u_lo, vel, om = _locate_jumps_batch(
             b.tau, b.k, U, u_t, v_t, float(u_s), omega_b
         )
         nc = idx.size
@@ -359,20 +373,22 @@ def element_forces_batch(
     v_all = np.concatenate([v_t.ravel(), vel, vel]) if nc else v_t.ravel()
     ev = element.evaluate(u_all, v_all, want_params)
     nN = n * N
-    f = ev.f[:nN].reshape(n, N)
-    F = f @ b.P.T
-    D = None
-    if jacobian:
-        du = ev.df_du[:nN].reshape(n, 1, N)
-        dv = (omega_b[:, None] * ev.df_dv[:nN].reshape(n, N))[:, None, :]
-        D = (b.P[None] * du) @ b.E + (b.P[None] * dv) @ b.dE
+    D = np.zeros((n, b.size, b.size)) if jacobian else None
+    F = _project_batch(
+        b.P,
+        b.E,
+        b.dE,
+        ev.f[:nN].reshape(n, N),
+        ev.df_du[:nN].reshape(n, N),
+        omega_b[:, None] * ev.df_dv[:nN].reshape(n, N),
+        np.zeros((n, 0, 0)) if D is None else D,
+    )
     dFp = None
     if want_params:
         dp = ev.df_dp[:, :nN].reshape(-1, n, N)
         dFp = np.ascontiguousarray(np.einsum("sm,pnm->nsp", b.P, dp))
     if nc:
         hi, lo = slice(nN, nN + nc), slice(nN + nc, nN + 2 * nc)
-        step = np.repeat(np.arange(n), np.diff(start))
         _add_jumps_batch(
             b.jump_weights,
             start,
@@ -381,7 +397,7 @@ def element_forces_batch(
             upp,
             t - (b.tau[idx] + np.pi / N),  # from the cell boundary the sum assumes
             ev.f[hi] - ev.f[lo],
-            omega_b[step] * (ev.df_dv[hi] - ev.df_dv[lo]),
+            om * (ev.df_dv[hi] - ev.df_dv[lo]),
             np.ascontiguousarray((ev.df_dp[:, hi] - ev.df_dp[:, lo]).T) if want_params else _NONE,
             np.asarray(dus_dp, dtype=float),
             F,
