@@ -62,11 +62,13 @@ class ParameterSpace:
         return len(self.names)
 
     def to_theta(self, p: npt.ArrayLike) -> np.ndarray:
-        """Scaled coordinates of physical values, shape (n,)."""
+        """Scaled coordinates of physical values, shape (n,) (or (m, n) for m points)."""
         p = np.asarray(p, dtype=float)
         theta = p / self.nominal
-        # the logarithm only of the log-scaled ones (a linear one may well be 0)
-        theta[self.log] = np.log(np.abs(p[self.log]) / np.abs(self.nominal[self.log]))
+        # the logarithm only of the log-scaled ones (a linear one may well be 0); p may hold
+        # many points, one per row
+        log = self.log
+        theta[..., log] = np.log(np.abs(p[..., log]) / np.abs(self.nominal[log]))
         return theta
 
     def to_physical(self, theta: np.ndarray) -> np.ndarray:

@@ -5,6 +5,8 @@ in closed form), many noise realisations (the coverage of the stated intervals),
 residuals (what the textbook covariance misses).
 """
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -182,3 +184,23 @@ def test_a_linear_result_of_another_model_is_refused(tmp_path):
     back = HeldParameters.from_json(held.to_json())
     np.testing.assert_array_equal(back.cov, held.cov)
     assert back.names == held.names
+
+
+def test_scaled_coordinates_of_one_point_and_of_many_without_warnings():
+    """A log-scaled parameter is scaled by the logarithm, a linear one by its nominal, for one
+    point or a row per point; a linear parameter at 0 (a candidate mass before its fit) is 0
+    with no warning (the logarithm is not taken of it)."""
+    sp = ParameterSpace(
+        names=("k", "m"),
+        log=np.array([True, False]),
+        nominal=np.array([1e4, 2.0]),
+        lower=np.array([1e2, 0.0]),
+        upper=np.array([1e6, 10.0]),
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        one = sp.to_theta([1e5, 0.0])
+        many = sp.to_theta([[1e5, 0.0], [1e3, 3.0]])
+    np.testing.assert_allclose(one, [np.log(10.0), 0.0], rtol=1e-15)
+    np.testing.assert_allclose(many, [[np.log(10.0), 0.0], [np.log(0.1), 1.5]], rtol=1e-15)
+    np.testing.assert_allclose(sp.to_physical(many[1]), [1e3, 3.0], rtol=1e-14)
