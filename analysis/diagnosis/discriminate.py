@@ -4,8 +4,10 @@ Each tied model (recalibrated in the full model) is swept as a pretest plan woul
 (:class:`analysis.planning.sweeps.SweepJob`: drive at the file's actuator, each candidate level,
 each of the paper's frequency ranges, outputs at every measurement point) and the
 *discriminating power* of a (sensor, level, range) is the RMS over its steps and orders of
-``|Y_a - Y_b| / sigma`` for the pair of candidates it separates worst, ``sigma`` the planning
-noise model's standard error of each phasor (:func:`analysis.planning.information.phasor_sigma`).
+``|Y_a - Y_b| / sigma`` for the pair of candidates it separates worst, ``sigma`` the standard
+error of each phasor (:func:`analysis.planning.information.phasor_sigma`) with each sensor's
+floor read from the file (:func:`file_noise`): a sensor whose point hardly moves in a band is
+worth nothing there if its noise is larger than the difference, whatever a default floor says.
 Besides the paper's ranges, a band around each mode of the structure below their top that none
 of them covers (:func:`mode_ranges`): tied places differ most where they move, and a place the
 paper's band hardly moves (a mount, in the frame's suspension modes below it) moves most in its
@@ -33,7 +35,7 @@ from analysis.planning.drive_current import ShakerDrive
 from analysis.planning.information import phasor_sigma
 from analysis.planning.sweeps import SweepJob, run_sweep
 
-__all__ = ["discriminate", "mode_ranges"]
+__all__ = ["discriminate", "file_noise", "mode_ranges"]
 
 
 def discriminate(
@@ -60,7 +62,7 @@ def discriminate(
         Candidate frequency ranges (default: the paper's seven 20 Hz ranges and
         :func:`mode_ranges` of the first candidate's model).
     noise : NoiseModel, optional
-        Default: the planning default (2 % and 0.01 m/s^2).
+        Default: :func:`file_noise` of ``data``.
     drive : ShakerDrive, optional
         The shaker and amplifier (default: from the file's lab setup; none there, the current
         is not checked).
@@ -80,7 +82,7 @@ def discriminate(
     """
     if len(group) < 2:
         raise ValueError("discrimination needs at least two tied candidates")
-    noise = noise or NoiseModel()
+    noise = noise or file_noise(data)
     levels = list(levels_n) if levels_n is not None else sorted(float(x) for x in data.levels_n)
     ratio = data.force_targets[0] / data.force_targets[0][0]
     masses = _sensor_masses(data)
@@ -166,6 +168,38 @@ def discriminate(
         "candidates": [g.candidate.label for g in group],
         "excluded": excluded,
     }
+
+
+def file_noise(data: SteppedSineData) -> NoiseModel:
+    """The noise of the file's accelerometers as a planning noise model.
+
+    Each acceleration channel's floor is the median over its steps and orders of the file's
+    standard error (``response_std``, of the complex phasor) over sqrt(2), the standard error
+    of each real part, as :class:`~analysis.planning.candidates.NoiseModel` takes it; two
+    sensors at one point, the quieter. A point the file does not measure (a sensor the
+    discrimination may propose) gets the median of the file's accelerometers: the same kind
+    of sensor on the same rig. The relative part stays the planning default's 2 %, the
+    paper's bound on what is proportional to the response (calibration, drift), which a
+    file's scatter does not show. A file without accelerometers gives the planning default.
+
+    The median is over the file's frequencies; a white floor's phasor error grows as the
+    square root of the frequency at a fixed number of recorded periods, so in a band below the
+    file's the floor is overstated, never understated.
+    """
+    per_point: dict[int, float] = {}
+    for c, ch in enumerate(data.channels):
+        if ch.quantity != "acceleration":
+            continue
+        std = np.asarray(data.response_std[:, c, :], float)
+        std = std[np.isfinite(std) & (std > 0)]
+        if std.size == 0:
+            continue
+        floor = float(np.median(std)) / math.sqrt(2.0)
+        point = int(ch.point)
+        per_point[point] = min(floor, per_point.get(point, math.inf))
+    if not per_point:
+        return NoiseModel()
+    return NoiseModel(floor=float(np.median(list(per_point.values()))), sensor_floors=per_point)
 
 
 #: Half-width of the band around a mode, as a share of its frequency, and its steps per band.

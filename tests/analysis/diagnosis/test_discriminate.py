@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+import pytest
+
 from analysis.diagnosis.candidates import default_candidates
 from analysis.diagnosis.discriminate import discriminate
 from analysis.planning.candidates import FrequencyRange
@@ -53,3 +55,38 @@ def test_bands_around_the_modes_below_the_paper_ranges(reference_model) -> None:
     for a, b in zip(bands, bands[1:], strict=False):
         assert a.stop_hz < b.start_hz  # merged: no overlap
     assert mode_ranges(reference_model, (FrequencyRange(0.5, 200.0, 1.0),)) == []
+
+
+def test_the_noise_is_the_files_per_sensor(runs) -> None:
+    """Each accelerometer's floor is the median of the file's standard errors over sqrt(2) (per
+    real part); a point the file does not measure gets the median of the file's sensors; a
+    sensor made noisier in the file is noisier in the model, the others unchanged."""
+    import dataclasses
+
+    import numpy as np
+
+    from analysis.diagnosis.discriminate import file_noise
+
+    data = runs("damper_p5")
+    noise = file_noise(data)
+    acc = [c for c, ch in enumerate(data.channels) if ch.quantity == "acceleration"]
+    assert acc and set(noise.sensor_floors) == {int(data.channels[c].point) for c in acc}
+    for c in acc:
+        expect = float(np.median(data.response_std[:, c, :])) / np.sqrt(2)
+        assert noise.floor_at(int(data.channels[c].point)) == pytest.approx(expect, rel=1e-12)
+    assert noise.floor == pytest.approx(float(np.median(list(noise.sensor_floors.values()))))
+    assert noise.relative == 0.02  # the planning default's proportional part
+    loud = acc[-1]
+    std = data.response_std.copy()
+    std[:, loud, :] *= 10.0
+    louder = file_noise(dataclasses.replace(data, response_std=std))
+    point = int(data.channels[loud].point)
+    assert louder.floor_at(point) == pytest.approx(10 * noise.floor_at(point))
+    for c in acc[:-1]:
+        p = int(data.channels[c].point)
+        assert louder.floor_at(p) == noise.floor_at(p)
+    # a file without accelerometers: the planning default
+    force_only = [dataclasses.replace(ch, quantity="force") for ch in data.channels]
+    from analysis.planning.candidates import NoiseModel
+
+    assert file_noise(dataclasses.replace(data, channels=tuple(force_only))) == NoiseModel()
