@@ -38,6 +38,7 @@ __all__ = [
     "LHS_STAGE",
     "CalibrationSettings",
     "NonlinearCalibration",
+    "bounded_costs",
     "calibrate_nonlinear",
     "fitted_rows",
     "level_rows",
@@ -476,17 +477,26 @@ def _evaluate_chunk(spec: ObjectiveSpec, thetas: np.ndarray) -> list[float]:
 
 
 def _screen_chunk(spec: ObjectiveSpec, thetas, offsets, keep: int | None, known: list[float]):
-    """:func:`_screen` of one chunk in a worker."""
-    return _screen(_objective_in_worker(spec), thetas, offsets, keep, known)
+    """:func:`bounded_costs` of one chunk in a worker."""
+    return bounded_costs(_objective_in_worker(spec), thetas, offsets, keep, known)
 
 
-def _screen(obj: FRFObjective, thetas, offsets, keep: int | None, known, on_each=None):
+def bounded_costs(
+    obj: FRFObjective,
+    thetas,
+    offsets,
+    keep: int | None,
+    known,
+    on_each: Callable[[float], None] | None = None,
+) -> tuple[list[float], list[bool]]:
     """Costs of ``thetas`` over ``obj``'s selection, in turn: ``(costs, exact)``.
 
     ``offsets`` are the points' costs over the rest of the selection (already scored), and a
     point's total is its offset plus its cost here. With ``keep``, each point is stopped once
     its total provably exceeds the ``keep``-th smallest exact total known (``known``, then
-    those of this chunk), and the cost here is then a lower bound (``exact`` False).
+    those of this chunk), and the cost here is then a lower bound (``exact`` False): the
+    ``keep`` smallest totals, and which points have them, are those of scoring every point
+    whole. ``on_each(cost)`` after each point.
     """
     known = list(known)
     costs, exact = [], []
@@ -504,15 +514,15 @@ def _screen(obj: FRFObjective, thetas, offsets, keep: int | None, known, on_each
         if ok and np.isfinite(c):
             known.append(off + c)
         if on_each:
-            on_each()
+            on_each(c)
     return costs, exact
 
 
 def _screen_all(spec, local, thetas, offsets, keep, executor, tick):
-    """:func:`_screen` of every point, in chunks on ``executor`` (in order, as many in flight as
-    workers, each later chunk starting with every exact total known by then)."""
+    """:func:`bounded_costs` of every point, in chunks on ``executor`` (in order, as many in
+    flight as workers, each later chunk starting with every exact total known by then)."""
     if executor is None:
-        c, e = _screen(local or spec.build(), thetas, offsets, keep, [], tick)
+        c, e = bounded_costs(local or spec.build(), thetas, offsets, keep, [], lambda _: tick())
         return np.array(c, dtype=float), np.array(e, bool)
     workers = max(1, getattr(executor, "_max_workers", 2) or 2)
     parts = [

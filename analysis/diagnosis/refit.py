@@ -21,6 +21,7 @@ import numpy as np
 from analysis.calibration.lhs import Distribution, latin_hypercube
 from analysis.calibration.lm import OUT_OF_EVALUATIONS, LeastSquaresResult, least_squares_lm
 from analysis.calibration.modal_damping import ZETA, DampedPredictor, damped_space
+from analysis.calibration.nonlinear import bounded_costs
 from analysis.calibration.objective import FRFObjective
 from analysis.events import Listener, UnitDone, iterations
 from analysis.measurement_file import SteppedSineData
@@ -51,7 +52,8 @@ class Refit:
         Per accepted LM iteration of the best start: ``iteration``, ``chi2_per_dof``,
         ``parameters``.
     start_costs : list of float
-        Metric of every start tried (``inf`` where the model did not converge).
+        Metric of every start tried (``inf`` where the model did not converge; a lower bound
+        above the best's where a start was stopped once it could not be the best).
     lm : LeastSquaresResult
     seconds : float
     evaluations : int
@@ -321,7 +323,9 @@ def refit(
     p0 = np.array([_current(model, n) for n in names])
     thetas = _start_thetas(space, names, p0, starts)
     whole = good.size == rows.size
-    costs, n_start_evaluations = _start_costs(obj, thetas, p0, base if whole else None, progress)
+    costs, n_start_evaluations = _start_costs(
+        obj, thetas, p0, base if whole else None, max(starts.n_lm, 1), progress
+    )
     drop = limits.reweight_drop if starts.n_lm == 1 else None
     rule = StopRule(limits.give_up_chi2, drop)
     best, reweigh, n_lm_evaluations = _lm_from_starts(
@@ -387,33 +391,34 @@ def _start_thetas(space, names, p0, starts: Starts):
 
 
 def _start_costs(
-    obj: FRFObjective, thetas, p0, base, progress: Listener | None
+    obj: FRFObjective, thetas, p0, base, keep: int, progress: Listener | None
 ) -> tuple[np.ndarray, int]:
     """The metric at each start and the evaluations that took; ``base`` is the start model's
     prediction when it holds on every fitted step (the first start's metric without a
-    solve)."""
+    solve). Only the ``keep`` best starts are refined, so a start is stopped once its metric
+    provably exceeds the ``keep``-th best known (:func:`bounded_costs`): its metric is then a
+    lower bound, and the ``keep`` best, and their metrics, are those of scoring every start
+    whole. A start far from the data, whose steps the balance struggles with, costs little."""
+    if len(thetas) == 1:  # one start: its metric is Levenberg-Marquardt's first evaluation
+        return np.array([np.nan]), 0
     space = obj.space
-    costs = []
-    evaluations = 0
-    if len(thetas) == 1:
-        costs = [np.nan]  # one start: its metric is Levenberg-Marquardt's first evaluation
-    else:
-        for i, th in enumerate(thetas):
-            if (
-                i == 0
-                and base is not None
-                and np.allclose(space.to_physical(th), p0, rtol=1e-12, atol=0)
-            ):
-                costs.append(obj.cost_of(base))  # the start model itself, predicted above
-            else:
-                costs.append(obj.cost(th))
-                evaluations += 1
-            if progress:
-                progress(UnitDone("starts", i + 1, len(thetas), cost=float(costs[-1])))
+    costs: list[float] = []
+
+    def done(cost: float) -> None:
+        costs.append(cost)
+        if progress:
+            progress(UnitDone("starts", len(costs), len(thetas), cost=float(cost)))
+
+    rest = thetas
+    if base is not None and np.allclose(space.to_physical(thetas[0]), p0, rtol=1e-12, atol=0):
+        done(obj.cost_of(base))  # the start model itself, predicted above
+        rest = thetas[1:]
+    known = [c for c in costs if np.isfinite(c)]
+    bounded_costs(obj, rest, np.zeros(len(rest)), keep, known, done)
     out = np.array(costs)
-    if len(thetas) > 1 and not np.isfinite(out).any():
+    if not np.isfinite(out).any():
         raise RuntimeError("no start gives a converged model response on the fitted steps")
-    return out, evaluations
+    return out, len(rest)
 
 
 def _lm_from_starts(

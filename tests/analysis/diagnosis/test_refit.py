@@ -138,13 +138,50 @@ def test_the_start_model_is_not_solved_again_to_rank_the_starts(
     data = runs("damper_p5")
     k = reference_model.parameters["k_c"].value
     calls = []
-    cost = FRFObjective.cost
-    monkeypatch.setattr(FRFObjective, "cost", lambda self, th: calls.append(th) or cost(self, th))
+    bounded = FRFObjective.bounded_cost
+
+    def counted(self, th, limit, stop_at_failure=None):
+        calls.append(th)
+        return bounded(self, th, limit, stop_at_failure)
+
+    monkeypatch.setattr(FRFObjective, "bounded_cost", counted)
     two = refit(reference_model, data, ["k_c"], starts=Starts([{"k_c": 1.2 * k}]), limits=ONE)
     assert len(calls) == 1  # the further start only
     one = refit(reference_model, data, ["k_c"], limits=ONE)
     assert one.start_costs[0] == pytest.approx(two.start_costs[0], rel=1e-9)
     assert two.start_costs[1] > two.start_costs[0]  # the model's own k_c fits better
+
+
+@pytest.mark.slow
+def test_starts_that_cannot_be_the_best_are_stopped_and_the_fit_is_the_same(
+    runs, reference_model, monkeypatch
+) -> None:
+    """Only the best start is refined, so a start is stopped once its metric exceeds the best
+    known: the fit (its parameters and metric) is that of scoring every start whole (to
+    1e-12); a stopped start's metric is a lower bound, above the best's and at most its whole
+    metric, and below it where the stop saved steps."""
+    from analysis.calibration.objective import FRFObjective
+
+    data = runs("damper_p5")
+    k = reference_model.parameters["k_c"].value
+    g = reference_model.parameters["gap"].value
+    starts = Starts([{"k_c": 0.2 * k, "gap": 2 * g}, {"k_c": 1.05 * k}, {"k_c": 5 * k}])
+    fit = refit(reference_model, data, ["k_c", "gap"], starts=starts, limits=ONE)
+    bounded = FRFObjective.bounded_cost
+    monkeypatch.setattr(
+        FRFObjective,
+        "bounded_cost",
+        lambda self, th, limit, stop_at_failure=None: bounded(self, th, None, stop_at_failure),
+    )
+    whole = refit(reference_model, data, ["k_c", "gap"], starts=starts, limits=ONE)
+    assert fit.parameters == pytest.approx(whole.parameters, rel=1e-12)
+    assert fit.chi2_per_dof == pytest.approx(whole.chi2_per_dof, rel=1e-12)
+    best = min(whole.start_costs)
+    assert min(fit.start_costs) == pytest.approx(best, rel=1e-12)
+    pairs = list(zip(fit.start_costs, whole.start_costs, strict=True))
+    for lower, full in pairs:
+        assert lower == pytest.approx(full, rel=1e-12) or best < lower <= full * (1 + 1e-12)
+    assert any(lower < full * (1 - 1e-6) for lower, full in pairs), "no start was stopped"
 
 
 @pytest.mark.slow
