@@ -20,6 +20,23 @@ def test_a_periodic_loop_dissipates_coulomb_energy() -> None:
     assert np.all(ev.df_du[np.abs(ev.f) < 1.999] == -1e5)
 
 
+def test_the_periodic_march_is_the_time_engines_second_period() -> None:
+    """The balance's periodic evaluation (the period marched twice, compiled) equals the
+    time engine's return mapping advanced one sample at a time over two periods: the second
+    period's forces and tangents, to rounding."""
+    el = JenkinsElement(k_t=1e5, f_s=2.0)
+    t = np.linspace(0, 2 * np.pi, 1024, endpoint=False)
+    u = 6e-5 * np.cos(t) + 2e-5 * np.sin(3 * t + 0.4)  # two slips a half period
+    periodic = el.evaluate(u, np.zeros_like(u))
+    stepper = JenkinsElement(k_t=1e5, f_s=2.0)
+    steps = [stepper.evaluate(np.array([x]), np.zeros(1)) for x in np.concatenate([u, u])]
+    f = np.array([s.f[0] for s in steps[u.size :]])
+    df = np.array([s.df_du[0] for s in steps[u.size :]])
+    np.testing.assert_allclose(periodic.f, f, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(periodic.df_du, df)
+    assert (df == 0).any() and (df == -1e5).any()  # it slips and sticks
+
+
 def test_the_time_engine_advances_each_slider() -> None:
     el = JenkinsElement(k_t=1e5, f_s=1.0)
     f = [float(el.evaluate(np.array([x]), np.zeros(1)).f[0]) for x in (0.0, 5e-6, 2e-5, 1e-5)]
