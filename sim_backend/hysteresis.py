@@ -48,7 +48,7 @@ def _march(u: np.ndarray, k: float, fs: float, z0: float) -> tuple[np.ndarray, n
     """Slider positions and stick flags over samples ``u`` (one dimension) from slider ``z0``.
 
     Compiled: the balance marches the period twice at every evaluation (1024 samples on the
-    simulated rig), the innermost loop of a hysteretic truth's simulated test."""
+    simulated rig)."""
     z = np.empty_like(u)
     stuck = np.empty(u.shape, np.bool_)
     zc = z0
