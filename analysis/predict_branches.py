@@ -448,15 +448,15 @@ class BranchMatchedPredictor(SteppedSinePredictor):
             if not p.converged:
                 continue
             prep = p.lin.get("prep") or _prepare(pb, p.omega, p.force[k_all])
-            w = prep["w"]
-            Hof = pb.blocks["of"](w)[:, :C, 0]  # (H+1, C)
+            rec = prep["rec"]
+            Hof = rec["of"][:, :C, 0]  # (H+1, C)
             n = pb.n_nl
             dirs = [(j, h, unit) for j, h in enumerate(k_all) for unit in (1.0, 1j)]
             dq_all = np.zeros((len(dirs), b.n_harmonics + 1, C), complex)
             if n:
                 J = np.eye(b.size * n) - prep["G"] @ p.lin["dF"]
-                Hnf = pb.blocks["nf"](w)[:, :, 0]  # (H+1, n)
-                Hon = pb.blocks["on"](w)[:, :C, :]  # (H+1, C, n)
+                Hnf = rec["nf"][:, :, 0]  # (H+1, n)
+                Hon = rec["on"][:, :C, :]  # (H+1, C, n)
                 rhs = []
                 for _, h, unit in dirs:
                     e = np.zeros((b.n_harmonics + 1, n), complex)

@@ -14,7 +14,10 @@ becomes continuous, Newton converges to its tolerance and the Jacobian includes 
 
 The crossings and the jump integrals are a handful of numbers per crossing, computed by small
 loops compiled with numba (in numpy they were some fifty calls on arrays of two, most of the
-time of a contact model's balance); the laws themselves stay numpy code.
+time of a contact model's balance). A law with a compiled form
+(:meth:`~analysis.elements.base.NonlinearElement.compiled_law`) is evaluated between two
+compiled halves, the samples and the projection; the others, and every evaluation with
+parameter derivatives, go through the element's numpy code on a batch of states.
 """
 
 from __future__ import annotations
@@ -238,19 +241,36 @@ def _add_jumps_batch(w, start, rows, up, upp, offset, J, dJ_dvel, dJ_dp, dus_dp,
 
 
 @njit(cache=True)
-def _compiled_forces(law, p, EdE, P, E, dE, tau, k, jw, Ue, omega_b, u_s, dus_dp, D):
-    """:func:`element_forces` without parameter derivatives for a law compiled with numba
-    (``u_s`` NaN: no jump), in one call; ``D`` (zeroed) receives ``dF/dUe`` unless of size 0."""
+def _samples(EdE, tau, k, Ue, omega_b, u_s):
+    """The displacement and velocity samples of one state for a compiled law, with both sides
+    of every crossing of ``u_s`` appended (``u_s`` NaN: no jump), and the crossings as
+    :func:`_locate_jumps` gives them."""
     N = tau.size
     uv = EdE @ Ue
     u_t, v_t = uv[:N].copy(), omega_b * uv[N:]
-    nc = 0
-    if not np.isnan(u_s):
-        idx, t, rows, up, upp = _locate_jumps(tau, k, Ue, u_t, u_s)
-        nc = idx.size
-        if nc:
-            u_t, v_t = _jump_sides(u_t, v_t, idx, up, u_s, omega_b)
-    f, df_du, df_dv = law(u_t, v_t, p)
+    if np.isnan(u_s):
+        return (
+            u_t,
+            v_t,
+            np.empty(0, np.int64),
+            np.empty(0),
+            np.empty((2, 0, Ue.size)),
+            np.empty(0),
+            np.empty(0),
+        )
+    idx, t, rows, up, upp = _locate_jumps(tau, k, Ue, u_t, u_s)
+    if idx.size:
+        u_t, v_t = _jump_sides(u_t, v_t, idx, up, u_s, omega_b)
+    return u_t, v_t, idx, t, rows, up, upp
+
+
+@njit(cache=True)
+def _samples_to_harmonics(
+    f, df_du, df_dv, P, E, dE, tau, jw, omega_b, idx, t, rows, up, upp, dus_dp, D
+):
+    """The law's samples (from :func:`_samples`) projected on the harmonics, with the jumps'
+    integrals; ``D`` (zeroed) receives ``dF/dUe`` unless of size 0."""
+    N, nc = tau.size, idx.size
     F = _project(P, E, dE, f[:N], df_du[:N], omega_b * df_dv[:N], D)
     if nc:
         hi, lo = slice(N, N + nc), slice(N + nc, N + 2 * nc)
@@ -304,19 +324,29 @@ def element_forces(
         D = np.zeros((b.size, b.size)) if jacobian else None
         u_s, dus_dp = (np.nan, _NO_PARAMS) if sw is None else sw
         law, p = compiled
-        F = _compiled_forces(
-            law,
-            p,
-            b.EdE,
+        omega_b = float(omega_b)
+        u_t, v_t, idx, t, rows, up, upp = _samples(
+            b.EdE, b.tau, b.k, np.ascontiguousarray(Ue, dtype=float), omega_b, float(u_s)
+        )
+        # the law is called from here, between two compiled halves: numba types a compiled
+        # function passed as an argument anew at every call (numba issue #2952), some 10 us,
+        # as long as the whole evaluation of a contact law
+        f, df_du, df_dv = law(u_t, v_t, p)
+        F = _samples_to_harmonics(
+            f,
+            df_du,
+            df_dv,
             b.P,
             b.E,
             b.dE,
             b.tau,
-            b.k,
             b.jump_weights,
-            np.ascontiguousarray(Ue, dtype=float),
-            float(omega_b),
-            float(u_s),
+            omega_b,
+            idx,
+            t,
+            rows,
+            up,
+            upp,
             np.asarray(dus_dp, dtype=float),
             _NONE if D is None else D,
         )
@@ -424,6 +454,11 @@ def nonlinear_forces(problem, X: np.ndarray, omega_b: float, jacobian: bool = Tr
     b = problem.basis
     U = X @ problem.L.T
     n, s = problem.n_nl, b.size
+    if (
+        problem.L.shape == (1, 1) and problem.L[0, 0] == 1.0
+    ):  # one element to ground, as the paper's
+        Fe, De, _ = element_forces(b, problem.attachments[0].element, U[:, 0], omega_b, jacobian)
+        return Fe[:, None], De
     F = np.zeros((s, n))
     dF = np.zeros((s, n, s, n)) if jacobian else None
     for e, att in enumerate(problem.attachments):

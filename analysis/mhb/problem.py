@@ -17,6 +17,7 @@ Proc. IMAC XV, 1997. T. Abrahamsson et al. / Y. Chen et al. (the reference paper
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from fractions import Fraction
 
@@ -26,7 +27,38 @@ from analysis.elements.base import NonlinearElement
 from analysis.linear.receptance import LinearModel
 from analysis.mhb.harmonics import HarmonicBasis, base_denominator, order_indices
 
-__all__ = ["Attachment", "HarmonicProblem"]
+__all__ = ["Attachment", "HarmonicProblem", "LINEAR_CACHE_SIZE", "real_operator"]
+
+#: frequencies whose receptance blocks a problem keeps (:meth:`HarmonicProblem.receptances`):
+#: a stepped test's every level at the same frequencies, a few hundred steps
+LINEAR_CACHE_SIZE = 1024
+
+
+def real_operator(Hc: np.ndarray) -> np.ndarray:
+    """Real coefficient operator of complex receptances.
+
+    Parameters
+    ----------
+    Hc : ndarray, shape (H+1, r, c), complex
+        Receptance at harmonics ``0..H`` (harmonic 0 must be real).
+
+    Returns
+    -------
+    ndarray, shape ((2H+1) r, (2H+1) c)
+        ``G`` such that coefficients of ``Re{Hc X}`` are ``G @ x`` (coefficient-major order).
+    """
+    Hn, r, c = Hc.shape
+    H = Hn - 1
+    G = np.zeros((2 * H + 1, r, 2 * H + 1, c))
+    G[0, :, 0, :] = Hc[0].real
+    ia = np.arange(1, 2 * H, 2)
+    ib = ia + 1
+    Hr, Hi = Hc[1:].real, Hc[1:].imag
+    G[ia, :, ia, :] = Hr
+    G[ia, :, ib, :] = Hi
+    G[ib, :, ia, :] = -Hi
+    G[ib, :, ib, :] = Hr
+    return G.reshape((2 * H + 1) * r, (2 * H + 1) * c)
 
 
 @dataclass(frozen=True)
@@ -115,6 +147,7 @@ class HarmonicProblem:
             "on": self.linear.block(self.output_dofs, nl) if n else None,
             "of": self.linear.block(self.output_dofs, self.force_dofs),
         }
+        self._receptances: OrderedDict[float, dict] = OrderedDict()
 
     # ------------------------------------------------------------------------------------
     @property
@@ -124,6 +157,34 @@ class HarmonicProblem:
     def harmonic_omegas(self, omega: float) -> np.ndarray:
         """Angular frequencies of harmonics ``0..H`` of the base, shape (H+1,), rad/s."""
         return np.arange(self.n_harmonics + 1) * (omega / self.denominator)
+
+    def receptances(self, omega: float) -> dict[str, np.ndarray]:
+        """The receptance blocks at the harmonics of ``omega`` (read-only arrays): ``w`` the
+        harmonics' angular frequencies, ``nf``, ``on``, ``of`` the blocks (H+1, rows, cols),
+        ``G`` the real operator of ``nn`` (harmonic 0 real) on the balance's coefficients.
+
+        They depend on the frequency alone, and a stepped test solves every level at the same
+        frequencies: each frequency's are computed once and kept (the last
+        :data:`LINEAR_CACHE_SIZE`). Problems made by :meth:`with_elements` share them, as they
+        share the linear structure.
+        """
+        key = float(omega)
+        out = self._receptances.get(key)
+        if out is not None:
+            self._receptances.move_to_end(key)
+            return out
+        w = self.harmonic_omegas(key)
+        out = {"w": w, "of": self.blocks["of"](w)}
+        if self.n_nl:
+            Hnn = self.blocks["nn"](w)
+            Hnn[0] = Hnn[0].real
+            out.update(G=real_operator(Hnn), nf=self.blocks["nf"](w), on=self.blocks["on"](w))
+        for a in out.values():
+            a.setflags(write=False)
+        self._receptances[key] = out
+        if len(self._receptances) > LINEAR_CACHE_SIZE:
+            self._receptances.popitem(last=False)
+        return out
 
     def force_harmonics(self, force: np.ndarray) -> np.ndarray:
         """Spread force phasors per order, shape (n_orders, n_f), onto harmonics (H+1, n_f)."""

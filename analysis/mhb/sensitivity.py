@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from analysis.mhb.aft import parameter_forces
-from analysis.mhb.problem import HarmonicProblem
-from analysis.mhb.solver import MHBPoint, real_operator
+from analysis.mhb.problem import HarmonicProblem, real_operator
+from analysis.mhb.solver import MHBPoint
 
 __all__ = ["PointSensitivity", "parameter_names", "point_sensitivities"]
 
@@ -91,7 +91,7 @@ def point_sensitivities(
         G, dFdX, F = prep["G"], point.lin["dF"], point.lin["F"]
         J = np.eye(b.size * n) - G @ dFdX
         dF_el = parameter_forces(problem, point.X, prep["omega_b"])
-        Hon = problem.blocks["on"](w)
+        Hon = prep["rec"]["on"]
     for p in names:
         dq = np.zeros_like(point.q_out)
         if n:

@@ -109,52 +109,22 @@ class MHBPoint:
             return self.q_out[self.order_k] / F[:, None]
 
 
-def real_operator(Hc: np.ndarray) -> np.ndarray:
-    """Real coefficient operator of complex receptances.
-
-    Parameters
-    ----------
-    Hc : ndarray, shape (H+1, r, c), complex
-        Receptance at harmonics ``0..H`` (harmonic 0 must be real).
-
-    Returns
-    -------
-    ndarray, shape ((2H+1) r, (2H+1) c)
-        ``G`` such that coefficients of ``Re{Hc X}`` are ``G @ x`` (coefficient-major order).
-    """
-    Hn, r, c = Hc.shape
-    H = Hn - 1
-    G = np.zeros((2 * H + 1, r, 2 * H + 1, c))
-    G[0, :, 0, :] = Hc[0].real
-    ia = np.arange(1, 2 * H, 2)
-    ib = ia + 1
-    Hr, Hi = Hc[1:].real, Hc[1:].imag
-    G[ia, :, ia, :] = Hr
-    G[ia, :, ib, :] = Hi
-    G[ib, :, ia, :] = -Hi
-    G[ib, :, ib, :] = Hr
-    return G.reshape((2 * H + 1) * r, (2 * H + 1) * c)
-
-
 def _prepare(problem: HarmonicProblem, omega: float, force: np.ndarray) -> dict:
-    w = problem.harmonic_omegas(omega)
+    rec = problem.receptances(omega)
     Fk = problem.force_harmonics(force)
-    prep = {"w": w, "Fk": Fk, "omega_b": omega / problem.denominator}
+    prep = {"w": rec["w"], "Fk": Fk, "omega_b": omega / problem.denominator, "rec": rec}
     if problem.n_nl:
-        Hnn = problem.blocks["nn"](w)
-        Hnf = problem.blocks["nf"](w)
-        Hnn[0] = Hnn[0].real
-        prep["G"] = real_operator(Hnn)
-        prep["X_lin"] = problem.basis.from_complex(np.einsum("kij,kj->ki", Hnf, Fk))
+        prep["G"] = rec["G"]
+        prep["X_lin"] = problem.basis.from_complex(np.einsum("kij,kj->ki", rec["nf"], Fk))
     return prep
 
 
 def _recover(problem: HarmonicProblem, prep: dict, F: np.ndarray | None) -> np.ndarray:
-    w, Fk = prep["w"], prep["Fk"]
-    q = np.einsum("kij,kj->ki", problem.blocks["of"](w), Fk)
+    rec, Fk = prep["rec"], prep["Fk"]
+    q = np.einsum("kij,kj->ki", rec["of"], Fk)
     if problem.n_nl and F is not None:
         Fc = problem.basis.to_complex(F)
-        q += np.einsum("kij,kj->ki", problem.blocks["on"](w), Fc)
+        q += np.einsum("kij,kj->ki", rec["on"], Fc)
     return q
 
 

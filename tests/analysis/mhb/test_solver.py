@@ -132,3 +132,46 @@ def test_sensitivities_match_finite_differences(system):
         fd = (out(h) - out(-h)) / (2 * h)
         an = sens[name].d_outputs(pb.order_k)
         assert np.abs(an - fd).max() <= 2e-4 * np.abs(fd).max(), name
+
+
+def test_a_frequencys_receptances_are_computed_once_and_the_solution_is_unchanged():
+    """A stepped test solves every level at the same frequencies: no block is evaluated twice
+    at a frequency over two levels, and the second level's solution is the one a fresh
+    problem without kept blocks gives, to the last bit; the kept blocks are read-only, bounded
+    in number, and shared with the problem's copies with other elements (same linear
+    structure)."""
+    import analysis.mhb.problem as problem_module
+
+    pb = contact_chain(n_harmonics=6, n_time=128)
+    seen = {name: [] for name in pb.blocks}
+
+    def counted(name, block):
+        def call(w):
+            seen[name].append(float(w[1]))
+            return block(w)
+
+        return call
+
+    pb.blocks = {k: counted(k, v) for k, v in pb.blocks.items()}
+    omega = 2 * np.pi * np.linspace(20.0, 30.0, 12)
+    F = np.array([40.0, 0.8, 0.8])
+    solve_steps(pb, omega, F)
+    assert all(len(seen[name]) >= len(omega) for name in seen)
+    high = solve_steps(pb, omega, 2 * F)  # (it may add substeps: new frequencies)
+    for name, ws in seen.items():
+        assert len(ws) == len(set(ws)), name  # no frequency's block evaluated twice
+
+    fresh = contact_chain(n_harmonics=6, n_time=128)
+    ref = solve_steps(fresh, omega, 2 * F)
+    for a, b in zip(high.points, ref.points, strict=True):
+        assert np.array_equal(a.X, b.X) and np.array_equal(a.q_out, b.q_out)
+    rec = pb.receptances(omega[0])
+    assert not rec["G"].flags.writeable and not rec["of"].flags.writeable
+    other = pb.with_elements([make_element("hertz_contact", k_c=1e6, gap=2e-3, v=1.0)])
+    assert other.receptances(omega[0]) is rec
+
+    small = contact_chain(n_harmonics=3, n_time=32)
+    many = 2 * np.pi * np.linspace(1.0, 50.0, problem_module.LINEAR_CACHE_SIZE + 5)
+    for w in many:
+        small.receptances(w)
+    assert len(small._receptances) == problem_module.LINEAR_CACHE_SIZE
