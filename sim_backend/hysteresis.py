@@ -67,6 +67,22 @@ def _march(u: np.ndarray, k: float, fs: float, z0: float) -> tuple[np.ndarray, n
     return z, stuck, zc
 
 
+@njit(cache=True)
+def _instant(u: np.ndarray, v: np.ndarray, p: np.ndarray, z: np.ndarray):
+    """Force and tangents of sliders ``z`` (advanced in place by the return mapping) at the
+    instant ``u``: the time engine's law (``v`` unused)."""
+    k, fs = p[0], p[1]
+    dz = fs / k
+    f = np.empty_like(u)
+    df_du = np.empty_like(u)
+    for i in range(u.size):
+        zi = min(max(z[i], u[i] - dz), u[i] + dz)
+        df_du[i] = -k if zi == z[i] else 0.0
+        z[i] = zi
+        f[i] = -k * (u[i] - zi)
+    return f, df_du, np.zeros_like(u)
+
+
 class JenkinsElement(NonlinearElement):
     """Jenkins element: spring ``k_t`` in series with a Coulomb slider of force ``f_s``.
 
@@ -94,20 +110,24 @@ class JenkinsElement(NonlinearElement):
             _, _, z_end = _march(u, k, fs, 0.0)
             z, stuck, _ = _march(u, k, fs, z_end)
         else:
-            flat = u.ravel()
-            if self._z.shape != flat.shape:
-                self._z = np.zeros(flat.shape)
-            dz = fs / k
-            z = np.clip(self._z, flat - dz, flat + dz)  # return mapping of each slider
-            stuck = z == self._z
-            self._z = z
-            z, stuck = z.reshape(u.shape), stuck.reshape(u.shape)
+            flat = np.ascontiguousarray(u, dtype=float).ravel()
+            law, p, state = self.compiled_instant_law(flat.size)
+            f, df_du, _ = law(flat, flat, p, state)
+            z, stuck = state.reshape(u.shape), df_du.reshape(u.shape) != 0.0
         f = -k * (u - z)
         df_du = np.where(stuck, -k, 0.0)
         dp = None
         if want_params:
             dp = np.stack([np.where(stuck, -(u - z), 0.0), np.where(stuck, 0.0, np.sign(f))])
         return ElementEval(f, df_du, np.zeros_like(u), dp)
+
+    def compiled_instant_law(self, n: int):
+        """The time engine's law for ``n`` sliders evaluated together (the integrator's
+        :func:`~sim_backend.integrator.instant_law`): the return mapping from each slider's
+        last state, which the call advances."""
+        if self._z.shape != (n,):
+            self._z = np.zeros(n)
+        return _instant, self._p, self._z
 
 
 if ELEMENT_TYPES.get(JenkinsElement.kind) is not JenkinsElement:

@@ -117,3 +117,31 @@ def test_paper_style_run_is_far_faster_than_real_time() -> None:
     assert run.simulated_s / run.wall_s > 10.0
     # away from the resonance the force controller reaches its targets on the simulated rig
     assert all(s.converged for s in run.steps if s.frequency_hz > 27.0)
+
+
+@pytest.mark.parametrize("truth", ["reference", "hysteretic_joint"])
+def test_the_compiled_engine_is_the_python_engine(truth: str) -> None:
+    """The compiled loop (contact law; contact and Jenkins slider with its memory) gives the
+    Python loop's states and forces to rounding (1e-9 of their largest value) on a drive that
+    closes the contact and slips the slider, and leaves the sliders where the Python loop
+    leaves them."""
+    fs, T = 2048.0, 0.3
+    t = np.arange(int(T * fs) + 1) / fs
+    u = 1.5 * np.sin(2 * np.pi * 25.6 * t) + 0.3 * np.sin(2 * np.pi * 51.2 * t)
+    out = {}
+    for compiled in (False, True):
+        rig = RigModel(load_truth(truth), (SensorSpec("force", 3, "y", 0.01),), 3)
+        stepper = TimeStepper(rig.space, rig.problem, fs, substeps=2, compiled=compiled)
+        assert (stepper.elements.compiled() is not None) or not compiled
+        eta0 = np.zeros(rig.space.size, dtype=complex)
+        res = stepper.run(eta0, stepper.forces_at(eta0), u)
+        memory = [getattr(a.element, "_z", np.zeros(0)).copy() for a in rig.problem.attachments]
+        out[compiled] = res, memory
+    (py, py_mem), (nb, nb_mem) = out[False], out[True]
+    assert np.abs(py.forces).max() > 0  # the elements act
+    np.testing.assert_allclose(nb.eta, py.eta, rtol=0, atol=1e-9 * np.abs(py.eta).max())
+    np.testing.assert_allclose(nb.forces, py.forces, rtol=0, atol=1e-9 * np.abs(py.forces).max())
+    for a, b in zip(nb_mem, py_mem, strict=True):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+    if truth == "hysteretic_joint":
+        assert any(m.size and np.abs(m).max() > 0 for m in py_mem)  # the slider slipped
