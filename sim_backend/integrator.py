@@ -103,6 +103,7 @@ class ElementSet:
 
 @njit
 def _evaluate_groups(groups, u, v, f, du, dv):
+    """Every group's law at the elements' motion ``u``, ``v``, into ``f``, ``du``, ``dv``."""
     memoryless, stateful = groups
     for g in literal_unroll(memoryless):
         law, idx, p = g
@@ -265,7 +266,6 @@ class TimeStepper:
         self.Cv = space.modal(rows_v)
         self.Du = (self.Cu @ self.H1).real
         self.Dv = (self.Cv @ self.H1).real
-        self._eye = np.eye(self.elements.size)
 
     def forces_at(self, eta: np.ndarray) -> np.ndarray:
         """Element forces (n_el,) in the state ``eta`` (p,)."""
@@ -277,12 +277,9 @@ class TimeStepper:
         Du, Dv, els = self.Du, self.Dv, self.elements
         for _ in range(_NEWTON_ITERATIONS):
             F, ku, kv = els.evaluate(au + Du @ f, av + Dv @ f)
-            r = f - F
-            scale = 1e-12 + 1e-10 * np.abs(F).max()
-            if np.abs(r).max() <= scale:
-                return F
-            J = self._eye - ku[:, None] * Du - kv[:, None] * Dv
-            f = f - np.linalg.solve(J, r)
+            done, f = _newton_step(f, F, ku, kv, Du, Dv)
+            if done:
+                break
         return F
 
     def run(self, eta0: np.ndarray, f0: np.ndarray, u: np.ndarray) -> StepResult:
