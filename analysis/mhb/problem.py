@@ -61,6 +61,29 @@ def real_operator(Hc: np.ndarray) -> np.ndarray:
     return G.reshape((2 * H + 1) * r, (2 * H + 1) * c)
 
 
+class _Receptances(dict):
+    """One frequency's receptance blocks, each computed when first asked for (a continuation
+    step needs ``G`` and ``nf`` at every trial frequency, the outputs' blocks only at the
+    points it keeps)."""
+
+    def __init__(self, blocks: dict, w: np.ndarray) -> None:
+        w.setflags(write=False)
+        super().__init__(w=w)
+        self._blocks = blocks
+
+    def __missing__(self, name: str) -> np.ndarray:
+        w = self["w"]
+        if name == "G":
+            Hnn = self._blocks["nn"](w)
+            Hnn[0] = Hnn[0].real
+            value = real_operator(Hnn)
+        else:
+            value = self._blocks[name](w)
+        value.setflags(write=False)
+        self[name] = value
+        return value
+
+
 @dataclass(frozen=True)
 class Attachment:
     """A nonlinear element placed between two structural DOFs (or a DOF and ground).
@@ -159,28 +182,21 @@ class HarmonicProblem:
         return np.arange(self.n_harmonics + 1) * (omega / self.denominator)
 
     def receptances(self, omega: float) -> dict[str, np.ndarray]:
-        """The receptance blocks at the harmonics of ``omega`` (read-only arrays): ``w`` the
-        harmonics' angular frequencies, ``nf``, ``on``, ``of`` the blocks (H+1, rows, cols),
-        ``G`` the real operator of ``nn`` (harmonic 0 real) on the balance's coefficients.
+        """The receptance blocks at the harmonics of ``omega`` (read-only arrays, each computed
+        when first asked for): ``w`` the harmonics' angular frequencies, ``nf``, ``on``, ``of``
+        the blocks (H+1, rows, cols), ``G`` the real operator of ``nn`` (harmonic 0 real) on
+        the balance's coefficients.
 
         They depend on the frequency alone, and a stepped test solves every level at the same
-        frequencies: each frequency's are computed once and kept (the last
-        :data:`LINEAR_CACHE_SIZE`). Problems made by :meth:`with_elements` share them, as they
-        share the linear structure.
+        frequencies: each frequency's are kept (the last :data:`LINEAR_CACHE_SIZE`). Problems
+        made by :meth:`with_elements` share them, as they share the linear structure.
         """
         key = float(omega)
         out = self._receptances.get(key)
         if out is not None:
             self._receptances.move_to_end(key)
             return out
-        w = self.harmonic_omegas(key)
-        out = {"w": w, "of": self.blocks["of"](w)}
-        if self.n_nl:
-            Hnn = self.blocks["nn"](w)
-            Hnn[0] = Hnn[0].real
-            out.update(G=real_operator(Hnn), nf=self.blocks["nf"](w), on=self.blocks["on"](w))
-        for a in out.values():
-            a.setflags(write=False)
+        out = _Receptances(self.blocks, self.harmonic_omegas(key))
         self._receptances[key] = out
         if len(self._receptances) > LINEAR_CACHE_SIZE:
             self._receptances.popitem(last=False)
