@@ -109,13 +109,13 @@ class JenkinsElement(NonlinearElement):
         if u.ndim == 1 and u.size >= PERIOD_SAMPLES:
             _, _, z_end = _march(u, k, fs, 0.0)
             z, stuck, _ = _march(u, k, fs, z_end)
+            f = -k * (u - z)
+            df_du = np.where(stuck, -k, 0.0)
         else:
             flat = np.ascontiguousarray(u, dtype=float).ravel()
             law, p, state = self.compiled_instant_law(flat.size)
-            f, df_du, _ = law(flat, flat, p, state)
-            z, stuck = state.reshape(u.shape), df_du.reshape(u.shape) != 0.0
-        f = -k * (u - z)
-        df_du = np.where(stuck, -k, 0.0)
+            f, df_du, _ = (a.reshape(u.shape) for a in law(flat, flat, p, state))
+            z, stuck = state.reshape(u.shape), df_du != 0.0
         dp = None
         if want_params:
             dp = np.stack([np.where(stuck, -(u - z), 0.0), np.where(stuck, 0.0, np.sign(f))])
@@ -123,7 +123,7 @@ class JenkinsElement(NonlinearElement):
 
     def compiled_instant_law(self, n: int):
         """The time engine's law for ``n`` sliders evaluated together (the integrator's
-        :func:`~sim_backend.integrator.instant_law`): the return mapping from each slider's
+        :meth:`~sim_backend.integrator.ElementSet.compiled`): the return mapping from each slider's
         last state, which the call advances."""
         if self._z.shape != (n,):
             self._z = np.zeros(n)
