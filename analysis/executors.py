@@ -13,13 +13,14 @@ a top-level function). :func:`open_executor` makes the usual ones:
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import os
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from typing import Generic, TypeVar
 
-__all__ = ["Deferred", "open_executor", "run_jobs"]
+__all__ = ["Deferred", "one_blas_thread", "open_executor", "run_jobs"]
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +35,28 @@ def _one_blas_thread() -> None:
     except ImportError:  # pragma: no cover - threadpoolctl is a dependency
         return
     threadpool_limits(limits=1)
+
+
+@functools.cache
+def _blas_controller():
+    # made at the first use, when the BLAS libraries that will be used are loaded: a
+    # controller acts only on the libraries it found when made
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
+
+
+@contextlib.contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """BLAS limited to one thread while the block runs, then as it was.
+
+    For work on small matrices (a few hundred rows): a BLAS thread costs more to wake than it
+    saves there, and two such jobs side by side, each with a thread per core, spend the cores
+    waiting on each other. The limit is the process's (BLAS has no other), so other threads
+    of the process get one BLAS thread meanwhile too.
+    """
+    with _blas_controller().limit(limits=1):
+        yield
 
 
 @contextlib.contextmanager

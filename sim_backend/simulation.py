@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis.executors import one_blas_thread
 from sim_backend.amplifier import AmplifierModel
 from sim_backend.drive import DriveProgram, analyse_period
 from sim_backend.integrator import TimeStepper
@@ -127,14 +128,18 @@ class RigSimulation:
         """The drive follows ``program`` from sample ``start`` (>= the generated samples)."""
         if start < self.index:
             raise ValueError(f"a drive change at {start} lies before sample {self.index}")
-        self._buffer.append(self._generate(start))
-        self._transition(start, program)
+        with one_blas_thread():  # see take
+            self._buffer.append(self._generate(start))
+            self._transition(start, program)
 
     def take(self, n: int) -> np.ndarray:
         """The next ``n`` samples of every sensor, shape (n, n_sensors), N and m/s^2."""
         stop = self.taken + n
         if stop > self.index:
-            self._buffer.append(self._generate(stop))
+            # the rig's matrices are small: one BLAS thread is faster alone and keeps two
+            # simulated tests on one machine from stalling each other
+            with one_blas_thread():
+                self._buffer.append(self._generate(stop))
         data = np.concatenate(self._buffer) if len(self._buffer) != 1 else self._buffer[0]
         out, rest = data[:n], data[n:]
         self._buffer = [rest] if rest.shape[0] else []

@@ -1,10 +1,13 @@
-"""Deferred jobs: on an executor at once, or in this process when first asked for."""
+"""Deferred jobs: on an executor at once, or in this process when first asked for; BLAS
+threads limited for a block."""
 
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 
-from analysis.executors import Deferred
+import pytest
+
+from analysis.executors import Deferred, one_blas_thread
 
 
 def test_a_deferred_job_runs_once_in_this_process_when_asked_for() -> None:
@@ -33,3 +36,22 @@ def test_a_deferred_job_starts_at_once_on_an_executor() -> None:
         ex.submit(lambda: None).result()  # the pool's one thread has taken the job before this
         assert ran == [5]
         assert later.result() == 25
+
+
+def _blas_threads() -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+def test_one_blas_thread_holds_inside_the_block_and_restores_after() -> None:
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=2):
+        assert set(_blas_threads()) == {2}
+        with one_blas_thread():
+            assert set(_blas_threads()) == {1}
+        assert set(_blas_threads()) == {2}
+        with pytest.raises(RuntimeError), one_blas_thread():
+            raise RuntimeError("a failing block restores the limit too")
+        assert set(_blas_threads()) == {2}

@@ -189,3 +189,33 @@ def test_random_drive_gives_an_h1_with_the_truths_first_beam_mode() -> None:
     quiet = (f > 40) & (f < 120)
     assert np.median(coh[quiet, 2]) > 0.9
     daq.close()
+
+
+def test_the_simulated_rig_computes_with_one_blas_thread(monkeypatch) -> None:
+    """Its matrices are small; two simulated tests at once must not each take every core."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from sim_backend.simulation import RigSimulation
+
+    seen = []
+
+    def spy(method):
+        def wrapped(self, *args):
+            seen.append({i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"})
+            return method(self, *args)
+
+        return wrapped
+
+    # the samples and a new drive's steady state
+    monkeypatch.setattr(RigSimulation, "_generate", spy(RigSimulation._generate))
+    monkeypatch.setattr(RigSimulation, "_transition", spy(RigSimulation._transition))
+    with threadpool_limits(limits=2):
+        daq = SimulatedDaq(noise=False, quantisation=False)
+        daq.configure(paper_config())
+        daq.write_periodic(multisine(N_PERIOD, 0.02), 0.0)
+        daq.start()
+        daq.read(4 * N_PERIOD, 5.0)
+        daq.close()
+        after = {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+    assert seen and all(s == {1} for s in seen)
+    assert after == {2}
