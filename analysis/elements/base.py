@@ -203,6 +203,12 @@ class NonlinearElement:
         """
         return None
 
+    def _compiled_evaluate(self, u: np.ndarray, v: np.ndarray) -> ElementEval:
+        """:meth:`evaluate` without parameter derivatives by the compiled law, in any shape:
+        what a law with one calls, so that the balance's two paths agree."""
+        law, p = self.compiled_law()
+        return ElementEval(*(a.reshape(u.shape) for a in law(u.ravel(), v.ravel(), p)))
+
     def _validate(self) -> None:
         """Check option values (and any further parameter rules); raise ``ValueError``.
 

@@ -2,11 +2,27 @@
 
 from __future__ import annotations
 
-import numpy as np
+from functools import cached_property
 
-from .base import ElementEval, ElementParameterError, NonlinearElement, register
+import numpy as np
+from numba import njit
+
+from .base import CompiledLaw, ElementEval, ElementParameterError, NonlinearElement, register
 
 __all__ = ["CoulombFriction"]
+
+
+@njit(cache=True)
+def _coulomb_law(u, v, p):
+    """``f``, ``df_du``, ``df_dv`` at samples ``u``, ``v`` for ``p = (f_slip, v_reg)``."""
+    f_slip, v_reg = p[0], p[1]
+    n = v.size
+    f, df_dv = np.empty(n), np.empty(n)
+    for i in range(n):
+        t = np.tanh(v[i] / v_reg)
+        f[i] = -f_slip * t
+        df_dv[i] = -(f_slip / v_reg) * (1.0 - t * t)
+    return f, np.zeros(n), df_dv
 
 
 @register
@@ -42,7 +58,17 @@ class CoulombFriction(NonlinearElement):
             )
         self.options["v_reg"] = v_reg
 
+    def compiled_law(self) -> tuple[CompiledLaw, np.ndarray]:
+        """:func:`_coulomb_law` (the numpy code below gives the parameter derivative)."""
+        return _coulomb_law, self._law_p
+
+    @cached_property
+    def _law_p(self) -> np.ndarray:
+        return np.array([self._p[0], self.options["v_reg"]], dtype=float)
+
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
+        if not want_params:
+            return self._compiled_evaluate(u, v)
         (f_slip,) = self._p
         v_reg = self.options["v_reg"]
         t = np.tanh(v / v_reg)

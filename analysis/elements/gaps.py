@@ -6,11 +6,13 @@ Hertzian contact of :mod:`analysis.elements.contact`.
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import ClassVar
 
 import numpy as np
+from numba import njit
 
-from .base import ElementEval, ElementParameterError, NonlinearElement, register
+from .base import CompiledLaw, ElementEval, ElementParameterError, NonlinearElement, register
 
 __all__ = ["BilinearSpring", "GapSpring", "OneSidedStop", "TwoSidedGap", "penetration"]
 
@@ -63,6 +65,33 @@ class OneSidedStop(NonlinearElement):
         self.options["side"] = int(side)
 
 
+@njit(cache=True)
+def _stops_law(u, v, p):
+    """``f``, ``df_du``, ``df_dv`` of linear stops of one stiffness and clearance on the sides
+    given, ``p = (k, gap, side_1, ...)``, in the order of operations of :func:`_linear_stop`."""
+    k, gap = p[0], p[1]
+    n = u.size
+    f, df_du = np.zeros(n), np.zeros(n)
+    for j in range(2, p.size):
+        side = p[j]
+        for i in range(n):
+            if side * u[i] > gap:
+                f[i] += -side * k * (side * u[i] - gap)
+                df_du[i] += -k
+    return f, df_du, np.zeros(n)
+
+
+@njit(cache=True)
+def _bilinear_law(u, v, p):
+    """``f``, ``df_du``, ``df_dv`` of the bilinear spring, ``p = (k_pos, k_neg)``."""
+    n = u.size
+    f, df_du = np.empty(n), np.empty(n)
+    for i in range(n):
+        df_du[i] = -p[0] if u[i] > 0 else -p[1]
+        f[i] = df_du[i] * u[i]
+    return f, df_du, np.zeros(n)
+
+
 def _linear_stop(u: np.ndarray, k: float, gap: float, side: int) -> tuple[np.ndarray, ...]:
     """``f, df_du, df_dk, df_dgap`` of ``f = -side k (side u - gap)`` in contact, 0 outside."""
     in_contact, delta = penetration(u, gap, side)
@@ -99,7 +128,17 @@ class GapSpring(OneSidedStop):
     nonnegative_params = ("gap",)
     description = "one-sided linear stop: f = k(-u - gap) for u < -gap (side -1) or mirror"
 
+    def compiled_law(self) -> tuple[CompiledLaw, np.ndarray]:
+        """:func:`_stops_law` on the element's side."""
+        return _stops_law, self._law_p
+
+    @cached_property
+    def _law_p(self) -> np.ndarray:
+        return np.array([self._p[0], self._p[1], self.side], dtype=float)
+
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
+        if not want_params:
+            return self._compiled_evaluate(u, v)
         f, df_du, df_dk, df_dgap = _linear_stop(u, self._p[0], self._p[1], self.side)
         df_dp = np.stack([df_dk, df_dgap]) if want_params else None
         return ElementEval(f, df_du, np.zeros_like(u), df_dp)
@@ -128,7 +167,17 @@ class TwoSidedGap(NonlinearElement):
     nonnegative_params = ("gap",)
     description = "dead-zone spring: f = -k(u - gap) for u > gap, -k(u + gap) for u < -gap"
 
+    def compiled_law(self) -> tuple[CompiledLaw, np.ndarray]:
+        """:func:`_stops_law` on both sides."""
+        return _stops_law, self._law_p
+
+    @cached_property
+    def _law_p(self) -> np.ndarray:
+        return np.array([self._p[0], self._p[1], 1.0, -1.0])
+
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
+        if not want_params:
+            return self._compiled_evaluate(u, v)
         upper, lower = (_linear_stop(u, self._p[0], self._p[1], side) for side in (1, -1))
         f, df_du, df_dk, df_dgap = (a + b for a, b in zip(upper, lower, strict=True))
         df_dp = np.stack([df_dk, df_dgap]) if want_params else None
@@ -154,7 +203,13 @@ class BilinearSpring(NonlinearElement):
     nonnegative_params = param_names
     description = "bilinear spring: f = -k_pos u for u > 0, -k_neg u otherwise"
 
+    def compiled_law(self) -> tuple[CompiledLaw, np.ndarray]:
+        """:func:`_bilinear_law`."""
+        return _bilinear_law, self._p
+
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
+        if not want_params:
+            return self._compiled_evaluate(u, v)
         k_pos, k_neg = self._p
         positive = u > 0
         df_dp = np.stack([np.where(positive, -u, 0.0), np.where(positive, 0.0, -u)])

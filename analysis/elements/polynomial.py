@@ -7,11 +7,13 @@ of one kinematic variable: the springs here (powers of ``u``) and the dampers of
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import ClassVar
 
 import numpy as np
+from numba import njit
 
-from .base import ElementEval, NonlinearElement, register
+from .base import CompiledLaw, ElementEval, NonlinearElement, register
 
 __all__ = [
     "CubicSpring",
@@ -20,6 +22,37 @@ __all__ = [
     "PowerSeriesElement",
     "QuadraticSpring",
 ]
+
+
+@njit(cache=True)
+def _power_series_law(u, v, p):
+    """``f``, ``df_du``, ``df_dv`` of ``f = -sum_j p_j g_j(x)`` at samples ``u``, ``v`` for
+    ``p = (on_velocity, signed, n_1..n_m, p_1..p_m)``, in the order of operations of the array
+    code (its integer powers 0-2 exact, higher ones by ``pow``, as numpy takes them)."""
+    on_velocity, signed = p[0] != 0.0, p[1] != 0.0
+    m = (p.size - 2) // 2
+    x = v if on_velocity else u
+    n = x.size
+    f, df_dx = np.zeros(n), np.zeros(n)
+    for i in range(n):
+        xi = x[i]
+        ax = abs(xi) if signed else xi
+        for j in range(m):
+            e, c = p[2 + j] - 1.0, p[2 + m + j]
+            if e == 0.0:
+                a = 1.0
+            elif e == 1.0:
+                a = ax
+            elif e == 2.0:
+                a = ax * ax
+            else:
+                a = ax**e
+            f[i] -= c * (xi * a)
+            df_dx[i] -= (p[2 + j] * c) * a
+    zero = np.zeros(n)
+    if on_velocity:
+        return f, zero, df_dx
+    return f, df_dx, zero
 
 
 class PowerSeriesElement(NonlinearElement):
@@ -35,7 +68,17 @@ class PowerSeriesElement(NonlinearElement):
     on_velocity: ClassVar[bool] = False
     signed: ClassVar[bool] = False
 
+    def compiled_law(self) -> tuple[CompiledLaw, np.ndarray]:
+        """:func:`_power_series_law` (the numpy code below gives the parameter derivatives)."""
+        return _power_series_law, self._law_p
+
+    @cached_property
+    def _law_p(self) -> np.ndarray:
+        return np.array([self.on_velocity, self.signed, *self.powers, *self._p], dtype=float)
+
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
+        if not want_params:
+            return self._compiled_evaluate(u, v)
         x = v if self.on_velocity else u
         ax = np.abs(x) if self.signed else x
         f, df_dx = np.zeros_like(x), np.zeros_like(x)

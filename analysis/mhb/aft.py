@@ -135,22 +135,32 @@ def _add_jumps(w, rows, up, upp, offset, J, dJ_dvel, dJ_dp, dus_dp, F, D, dFp):
 def _project(P, E, dE, f, df_du, df_dv, D):
     """``F = P f`` and, unless ``D`` has size 0, ``D = P diag(df_du) E + P diag(df_dv) dE``
     (``D`` zeroed on entry), over the samples where the law acts: a clearance law is zero on
-    most of the period, where dense products would multiply zeros."""
+    most of the period, where dense products would multiply zeros. ``D`` is one matrix product
+    of the acting samples' columns of ``P`` and rows of the law's derivatives (BLAS): summed
+    sample by sample it cost five times as much for a law that acts all period."""
     s, N = P.shape
-    F = np.zeros(s)
-    row = np.empty(E.shape[1])
-    jac = D.size > 0
+    act = np.empty(N, np.int64)
+    na = 0
     for m in range(N):
-        if f[m] == 0.0 and df_du[m] == 0.0 and df_dv[m] == 0.0:
-            continue
+        if not (f[m] == 0.0 and df_du[m] == 0.0 and df_dv[m] == 0.0):
+            act[na] = m
+            na += 1
+    F = np.zeros(s)
+    for a in range(na):
+        m = act[a]
         for i in range(s):
             F[i] += P[i, m] * f[m]
-        if jac:
-            for j in range(row.size):
-                row[j] = df_du[m] * E[m, j] + df_dv[m] * dE[m, j]
+    if D.size > 0 and na > 0:
+        nc = E.shape[1]
+        Pa = np.empty((s, na))
+        R = np.empty((na, nc))
+        for a in range(na):
+            m = act[a]
             for i in range(s):
-                for j in range(row.size):
-                    D[i, j] += P[i, m] * row[j]
+                Pa[i, a] = P[i, m]
+            for j in range(nc):
+                R[a, j] = df_du[m] * E[m, j] + df_dv[m] * dE[m, j]
+        D[:, :] = np.dot(Pa, R)
     return F
 
 
@@ -459,16 +469,20 @@ def nonlinear_forces(problem, X: np.ndarray, omega_b: float, jacobian: bool = Tr
     ):  # one element to ground, as the paper's
         Fe, De, _ = element_forces(b, problem.attachments[0].element, U[:, 0], omega_b, jacobian)
         return Fe[:, None], De
-    F = np.zeros((s, n))
-    dF = np.zeros((s, n, s, n)) if jacobian else None
+    m = len(problem.attachments)
+    Fs = np.empty((s, m))
+    Ds = np.empty((m, s * s)) if jacobian else None
     for e, att in enumerate(problem.attachments):
         Fe, De, _ = element_forces(b, att.element, U[:, e], omega_b, jacobian)
-        for i, li in problem.incidence[e]:  # F += outer(Fe, L[e]), dF += De (x) outer(L[e], L[e])
-            F[:, i] += li * Fe
-            if jacobian:
-                for j, lj in problem.incidence[e]:
-                    dF[:, i, :, j] += (li * lj) * De
-    return F, (dF.reshape(s * n, s * n) if jacobian else None)
+        Fs[:, e] = Fe
+        if jacobian:
+            Ds[e] = De.ravel()
+    F = Fs @ problem.L  # sum_e outer(Fe, L[e])
+    if not jacobian:
+        return F, None
+    # dF[k, i, l, j] = sum_e De[k, l] L[e, i] L[e, j]: one product over the elements
+    dF = (Ds.T @ problem.incidence_products).reshape(s, s, n, n).transpose(0, 2, 1, 3)
+    return F, dF.reshape(s * n, s * n)
 
 
 def parameter_forces(problem, X: np.ndarray, omega_b: float) -> dict[str, np.ndarray]:

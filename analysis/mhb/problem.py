@@ -162,8 +162,8 @@ class HarmonicProblem:
             if att.dof_b is not None:
                 L[e, nl.index(att.dof_b)] = -1.0
         self.L = L
-        # the nonzero entries of each row of L: (nl index, sign) pairs
-        self.incidence = [[(i, L[e, i]) for i in np.flatnonzero(L[e])] for e in range(len(L))]
+        # L[e, i] L[e, j] of each element, shape (n_elements, n * n): the Jacobian's assembly
+        self.incidence_products = np.einsum("ei,ej->eij", L, L).reshape(len(L), n * n)
         self.blocks = {
             "nn": self.linear.block(nl, nl) if n else None,
             "nf": self.linear.block(nl, self.force_dofs) if n else None,

@@ -156,6 +156,24 @@ def test_derivatives_match_central_differences(kind, values, u_scale, v_scale):
 
 
 @pytest.mark.parametrize(("kind", "values", "u_scale", "v_scale"), EXAMPLES, ids=EXAMPLE_IDS)
+def test_every_law_has_a_compiled_form_equal_to_its_array_code(kind, values, u_scale, v_scale):
+    """The balance evaluates the compiled law; the array code gives the parameter
+    derivatives. Both at random samples and at the switching points themselves, where a law
+    takes its open side: equal to rounding (``tanh`` and ``pow`` of two libraries differ in
+    the last place; a polynomial's terms cancel, so 4 ulp of the largest value sampled)."""
+    el = _build(kind, values)
+    assert el.compiled_law() is not None
+    u, v = _samples(values, u_scale, v_scale)
+    gap = values.get("gap", 0.0)
+    u = np.concatenate([u, [0.0, gap, -gap, 0.0]])
+    v = np.concatenate([v, [0.0, 0.0, v_scale, -v_scale]])
+    fast, ref = el.evaluate(u, v), el.evaluate(u, v, want_params=True)
+    for name in ("f", "df_du", "df_dv"):
+        a, r = getattr(fast, name), getattr(ref, name)
+        np.testing.assert_allclose(a, r, rtol=0.0, atol=9e-16 * np.abs(r).max(), err_msg=name)
+
+
+@pytest.mark.parametrize(("kind", "values", "u_scale", "v_scale"), EXAMPLES, ids=EXAMPLE_IDS)
 def test_vectorised_shapes_match_pointwise(kind, values, u_scale, v_scale):
     el = _build(kind, values)
     u_flat, v_flat = _samples(values, u_scale, v_scale, n=40)

@@ -119,9 +119,12 @@ def test_paper_style_run_is_far_faster_than_real_time() -> None:
     assert all(s.converged for s in run.steps if s.frequency_hz > 27.0)
 
 
-@pytest.mark.parametrize("truth", ["reference", "hysteretic_joint"])
+@pytest.mark.parametrize(
+    "truth", ["reference", "hysteretic_joint", "clamp_friction", "hardening_mounts"]
+)
 def test_the_compiled_engine_is_the_python_engine(truth: str) -> None:
-    """The compiled loop (contact law; contact and Jenkins slider with its memory) gives the
+    """The compiled loop (contact law; contact and Jenkins slider with its memory; contact
+    and friction; contact and cubic springs on the mounts) gives the
     Python loop's states and forces to rounding (1e-9 of their largest value) on a drive that
     closes the contact and slips the slider, and leaves the sliders where the Python loop
     leaves them."""
