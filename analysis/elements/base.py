@@ -152,6 +152,13 @@ class NonlinearElement:
     option_names: ClassVar[dict[str, object]] = {}
     description: ClassVar[str] = ""
 
+    def __init_subclass__(cls, **kwargs: object) -> None:
+        super().__init_subclass__(**kwargs)
+        # a subclass that writes its own law does not inherit its parent's compiled form of
+        # another law: the balance would evaluate the parent's law without a word
+        if "_evaluate" in cls.__dict__ and "compiled_law" not in cls.__dict__:
+            cls.compiled_law = NonlinearElement.compiled_law  # type: ignore[method-assign]
+
     def __init__(self, **values: float) -> None:
         unknown = set(values) - set(self.param_names) - set(self.option_names)
         if unknown:
@@ -203,10 +210,14 @@ class NonlinearElement:
         """
         return None
 
-    def _compiled_evaluate(self, u: np.ndarray, v: np.ndarray) -> ElementEval:
+    def _compiled_evaluate(self, u: np.ndarray, v: np.ndarray) -> ElementEval | None:
         """:meth:`evaluate` without parameter derivatives by the compiled law, in any shape:
-        what a law with one calls, so that the balance's two paths agree."""
-        law, p = self.compiled_law()
+        what a law with one calls, so that the balance's two paths agree; ``None`` without
+        one (a subclass that writes its own law and calls its parent's code)."""
+        compiled = self.compiled_law()
+        if compiled is None:
+            return None
+        law, p = compiled
         return ElementEval(*(a.reshape(u.shape) for a in law(u.ravel(), v.ravel(), p)))
 
     def _validate(self) -> None:

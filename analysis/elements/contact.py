@@ -97,8 +97,8 @@ class HertzContact(OneSidedStop):
         return np.append(self._p, float(self.side))
 
     def _evaluate(self, u: np.ndarray, vel: np.ndarray, want_params: bool) -> ElementEval:
-        if not want_params:
-            return self._compiled_evaluate(u, vel)
+        if not want_params and (ev := self._compiled_evaluate(u, vel)) is not None:
+            return ev
         k_c, gap, c = self._p
         side = self.side
         in_contact, d = penetration(u, gap, side)

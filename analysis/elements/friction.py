@@ -67,8 +67,8 @@ class CoulombFriction(NonlinearElement):
         return np.array([self._p[0], self.options["v_reg"]], dtype=float)
 
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
-        if not want_params:
-            return self._compiled_evaluate(u, v)
+        if not want_params and (ev := self._compiled_evaluate(u, v)) is not None:
+            return ev
         (f_slip,) = self._p
         v_reg = self.options["v_reg"]
         t = np.tanh(v / v_reg)

@@ -137,8 +137,8 @@ class GapSpring(OneSidedStop):
         return np.array([self._p[0], self._p[1], self.side], dtype=float)
 
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
-        if not want_params:
-            return self._compiled_evaluate(u, v)
+        if not want_params and (ev := self._compiled_evaluate(u, v)) is not None:
+            return ev
         f, df_du, df_dk, df_dgap = _linear_stop(u, self._p[0], self._p[1], self.side)
         df_dp = np.stack([df_dk, df_dgap]) if want_params else None
         return ElementEval(f, df_du, np.zeros_like(u), df_dp)
@@ -176,8 +176,8 @@ class TwoSidedGap(NonlinearElement):
         return np.array([self._p[0], self._p[1], 1.0, -1.0])
 
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
-        if not want_params:
-            return self._compiled_evaluate(u, v)
+        if not want_params and (ev := self._compiled_evaluate(u, v)) is not None:
+            return ev
         upper, lower = (_linear_stop(u, self._p[0], self._p[1], side) for side in (1, -1))
         f, df_du, df_dk, df_dgap = (a + b for a, b in zip(upper, lower, strict=True))
         df_dp = np.stack([df_dk, df_dgap]) if want_params else None
@@ -208,8 +208,8 @@ class BilinearSpring(NonlinearElement):
         return _bilinear_law, self._p
 
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
-        if not want_params:
-            return self._compiled_evaluate(u, v)
+        if not want_params and (ev := self._compiled_evaluate(u, v)) is not None:
+            return ev
         k_pos, k_neg = self._p
         positive = u > 0
         df_dp = np.stack([np.where(positive, -u, 0.0), np.where(positive, 0.0, -u)])

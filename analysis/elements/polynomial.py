@@ -77,8 +77,8 @@ class PowerSeriesElement(NonlinearElement):
         return np.array([self.on_velocity, self.signed, *self.powers, *self._p], dtype=float)
 
     def _evaluate(self, u: np.ndarray, v: np.ndarray, want_params: bool) -> ElementEval:
-        if not want_params:
-            return self._compiled_evaluate(u, v)
+        if not want_params and (ev := self._compiled_evaluate(u, v)) is not None:
+            return ev
         x = v if self.on_velocity else u
         ax = np.abs(x) if self.signed else x
         f, df_dx = np.zeros_like(x), np.zeros_like(x)

@@ -181,3 +181,35 @@ def test_every_laws_compiled_forces_match_the_numpy_path(kind, values, u_scale, 
         F_np, D_np, _ = element_forces(b, el, Ue, omega, True, want_params=True)
         assert np.abs(F - F_np).max() <= 1e-12 * max(np.abs(F_np).max(), 1e-300)
         assert np.abs(D - D_np).max() <= 1e-12 * max(np.abs(D_np).max(), 1e-300)
+
+
+def test_a_subclass_with_its_own_law_is_evaluated_by_its_own_law():
+    """A subclass that writes its own ``_evaluate`` (here a cubic spring made stiffer on one
+    side) loses its parent's compiled form: the balance evaluates the new law, not the
+    parent's; one that only changes a setting keeps the compiled form."""
+    from analysis.elements.polynomial import CubicSpring
+
+    class OneSidedCubic(CubicSpring):
+        def _evaluate(self, u, v, want_params):
+            ev = super()._evaluate(u, v, want_params)
+            scale = np.where(u > 0, 3.0, 1.0)
+            dp = None if ev.df_dp is None else ev.df_dp * scale
+            return type(ev)(ev.f * scale, ev.df_du * scale, ev.df_dv, dp)
+
+    class Quintic(CubicSpring):
+        powers = (5,)
+
+    b = HarmonicBasis(9, 128)
+    Ue = 1e-3 * np.array([0.2, 1.0, 0.3, 0.1, 0.0, 0.05, 0.0] + [0.0] * 12)
+    one_sided = OneSidedCubic(k3=1e9)
+    assert one_sided.compiled_law() is None
+    F, _, _ = element_forces(b, one_sided, Ue, OMEGA_B)
+    np.testing.assert_allclose(F, _plain(b, one_sided, Ue), rtol=0, atol=1e-12 * np.abs(F).max())
+    plain_cubic = _plain(b, CubicSpring(k3=1e9), Ue)
+    assert np.abs(F - plain_cubic).max() > 0.1 * np.abs(plain_cubic).max()
+    quintic = Quintic(k3=1e9)
+    assert quintic.compiled_law() is not None
+    F5, _, _ = element_forces(b, quintic, Ue, OMEGA_B)
+    np.testing.assert_allclose(F5, _plain(b, quintic, Ue), rtol=0, atol=1e-12 * np.abs(F5).max())
+    u = b.EdE[: b.n_time] @ Ue
+    np.testing.assert_allclose(quintic.force(u, 0 * u), -1e9 * u**5, rtol=1e-14)
