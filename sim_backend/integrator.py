@@ -17,8 +17,9 @@ leaves the balance. When every element has a compiled law (``compiled_law``, or 
 ``compiled_instant_law`` such as the simulator's Jenkins element), the whole loop runs
 compiled with numba; otherwise it runs in Python with the elements' numpy code. Both do the
 same arithmetic in the same order (a test holds them together to rounding). The compiled loop
-is compiled once per process and set of laws (about ten seconds: a loop over laws handed in
-as arguments cannot be cached by numba), which a run that integrates pays back many times.
+is compiled once per process and set of laws (a few seconds: a loop over laws handed in as
+arguments cannot be cached by numba, so it is kept thin and the arithmetic it calls is cached),
+which a run that integrates pays back many times.
 
 References
 ----------
