@@ -461,6 +461,9 @@ def nonlinear_forces(problem, X: np.ndarray, omega_b: float, jacobian: bool = Tr
     F : ndarray, shape (2H+1, n_nl)
     dF : ndarray, shape ((2H+1) n_nl, (2H+1) n_nl) or None
     """
+    compiled = problem.compiled_forces(X, omega_b, jacobian)
+    if compiled is not None:
+        return compiled
     b = problem.basis
     U = X @ problem.L.T
     n, s = problem.n_nl, b.size

@@ -25,6 +25,7 @@ import numpy as np
 
 from analysis.elements.base import NonlinearElement
 from analysis.linear.receptance import LinearModel
+from analysis.mhb import kernels
 from analysis.mhb.harmonics import HarmonicBasis, base_denominator, order_indices
 
 __all__ = ["Attachment", "HarmonicProblem", "LINEAR_CACHE_SIZE", "real_operator"]
@@ -171,6 +172,9 @@ class HarmonicProblem:
             "of": self.linear.block(self.output_dofs, self.force_dofs),
         }
         self._receptances: OrderedDict[float, dict] = OrderedDict()
+        b = self.basis
+        self.kernel_basis = (b.EdE, b.tau, b.k, b.P, b.E, b.dE, b.jump_weights)
+        self._element_arrays: kernels.ElementArrays | None | str = "not made"
 
     # ------------------------------------------------------------------------------------
     @property
@@ -202,6 +206,34 @@ class HarmonicProblem:
             self._receptances.popitem(last=False)
         return out
 
+    def element_arrays(self) -> kernels.ElementArrays | None:
+        """The elements as the compiled kernels take them (:mod:`analysis.mhb.kernels`), or
+        None when a law is not one of the library's; made at the first call."""
+        if isinstance(self._element_arrays, str):
+            self._element_arrays = kernels.element_arrays(self)
+        return self._element_arrays
+
+    def compiled_forces(
+        self, X: np.ndarray, omega_b: float, jacobian: bool
+    ) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """:func:`analysis.mhb.aft.nonlinear_forces` in one compiled call, or None when a law
+        is not one of the library's."""
+        arrays = self.element_arrays()
+        if arrays is None:
+            return None
+        F, dF = kernels.problem_forces(
+            np.ascontiguousarray(X, dtype=float),
+            float(omega_b),
+            arrays.codes,
+            arrays.params,
+            arrays.n_params,
+            arrays.thresholds,
+            arrays.L,
+            self.kernel_basis,
+            jacobian,
+        )
+        return F, dF if jacobian else None
+
     def force_harmonics(self, force: np.ndarray) -> np.ndarray:
         """Spread force phasors per order, shape (n_orders, n_f), onto harmonics (H+1, n_f)."""
         force = np.asarray(force, dtype=complex)
@@ -225,4 +257,5 @@ class HarmonicProblem:
         new = object.__new__(HarmonicProblem)
         new.__dict__.update(self.__dict__)
         new.attachments = atts
+        new._element_arrays = "not made"
         return new

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from analysis.mhb import kernels
 from analysis.mhb.aft import nonlinear_forces
 from analysis.mhb.problem import HarmonicProblem
 
@@ -115,16 +116,16 @@ def _prepare(problem: HarmonicProblem, omega: float, force: np.ndarray) -> dict:
     prep = {"w": rec["w"], "Fk": Fk, "omega_b": omega / problem.denominator, "rec": rec}
     if problem.n_nl:
         prep["G"] = rec["G"]
-        prep["X_lin"] = problem.basis.from_complex(np.einsum("kij,kj->ki", rec["nf"], Fk))
+        prep["X_lin"] = problem.basis.from_complex(np.matmul(rec["nf"], Fk[:, :, None])[:, :, 0])
     return prep
 
 
 def _recover(problem: HarmonicProblem, prep: dict, F: np.ndarray | None) -> np.ndarray:
     rec, Fk = prep["rec"], prep["Fk"]
-    q = np.einsum("kij,kj->ki", rec["of"], Fk)
+    q = np.matmul(rec["of"], Fk[:, :, None])[:, :, 0]
     if problem.n_nl and F is not None:
         Fc = problem.basis.to_complex(F)
-        q += np.einsum("kij,kj->ki", rec["on"], Fc)
+        q += np.matmul(rec["on"], Fc[:, :, None])[:, :, 0]
     return q
 
 
@@ -198,6 +199,25 @@ def solve_point(
         return _linear_point(problem, omega, prep)
     G, X_lin, wb = prep["G"], prep["X_lin"], prep["omega_b"]
     X = X_lin.copy() if X0 is None else np.array(X0, dtype=float).reshape(b.size, n)
+    arrays = problem.element_arrays()
+    if arrays is not None:
+        X, R, F, dF, outcome, it, rn = kernels.newton(
+            X,
+            G,
+            X_lin,
+            float(wb),
+            arrays.codes,
+            arrays.params,
+            arrays.n_params,
+            arrays.thresholds,
+            arrays.L,
+            problem.kernel_basis,
+            np.array(
+                [st.rtol, st.atol, st.max_iterations, st.stall_window, st.max_halvings], float
+            ),
+        )
+        message = kernels.MESSAGES[outcome].format(window=st.stall_window)
+        return _point(problem, omega, prep, X, F, dF, outcome == 0, it, rn, message)
     scale = max(np.abs(X_lin).max(), 1e-300)
 
     def residual(Xc: np.ndarray, jac: bool):
@@ -236,16 +256,21 @@ def solve_point(
     else:
         if rn <= st.rtol * max(np.abs(X).max(), scale) + st.atol:
             converged, message = True, "converged"
-    q_out = _recover(problem, prep, F)
+    return _point(problem, omega, prep, X, F, dF, converged, it, rn, message)
+
+
+def _point(problem, omega, prep, X, F, dF, converged, it, rn, message) -> MHBPoint:
+    """The solution found at ``omega``, with what its linearisation needs."""
+    b = problem.basis
     point = MHBPoint(
         omega=omega,
         X=X,
         q_nl=b.to_complex(X),
         f_nl=b.to_complex(F),
-        q_out=q_out,
+        q_out=_recover(problem, prep, F),
         force=prep["Fk"],
-        converged=converged,
-        iterations=it,
+        converged=bool(converged),
+        iterations=int(it),
         residual=float(rn),
         message=message,
         order_k=problem.order_k,
