@@ -22,7 +22,13 @@ import numpy as np
 
 from analysis.linear.modal import Modes, modal_analysis, mode_sensitivities
 
-__all__ = ["DirectLinearModel", "LinearModel", "ModalLinearModel", "ReceptanceBlock"]
+__all__ = [
+    "DirectLinearModel",
+    "LinearModel",
+    "ModalLinearModel",
+    "ReceptanceBlock",
+    "frequency_derivative",
+]
 
 
 class ReceptanceBlock(Protocol):
@@ -40,6 +46,19 @@ class ReceptanceBlock(Protocol):
     def derivative(self, omega: np.ndarray, param: str) -> np.ndarray:
         """``dH/dp`` at ``omega``, shape (n_omega, n_rows, n_cols)."""
         ...
+
+
+def frequency_derivative(block: ReceptanceBlock, omega: np.ndarray) -> np.ndarray:
+    """``dH/domega`` of a receptance block, shape (n_omega, n_rows, n_cols), m/N per rad/s:
+    the block's own ``frequency_derivative`` where it has one (exact), else central
+    differences of the block with steps of 1e-7 of the frequency (or of the largest one
+    asked for, at 0)."""
+    w = np.atleast_1d(np.asarray(omega, dtype=float))
+    exact = getattr(block, "frequency_derivative", None)
+    if exact is not None:
+        return exact(w)
+    h = 1e-7 * np.maximum(np.abs(w), max(float(np.abs(w).max()), 1.0))
+    return (np.asarray(block(w + h)) - np.asarray(block(w - h))) / (2 * h)[:, None, None]
 
 
 class LinearModel(Protocol):
@@ -72,6 +91,13 @@ class _ModalBlock:
     def __call__(self, omega: np.ndarray) -> np.ndarray:
         g = self._g(omega)
         return np.einsum("im,wm,jm->wij", self.phi_r, g, self.phi_c) + self.residual
+
+    def frequency_derivative(self, omega: np.ndarray) -> np.ndarray:
+        """``dH/domega``: ``dg/dw = g^2 (2 w - 2 i zeta w_r)``; the residual is static."""
+        w = np.asarray(omega, dtype=float)[:, None]
+        g = self._g(omega)
+        dg = g**2 * (2 * w - 2j * self.zeta_r * self.omega_r)
+        return np.einsum("im,wm,jm->wij", self.phi_r, dg, self.phi_c)
 
     def derivative(self, omega: np.ndarray, param: str) -> np.ndarray:
         dphi_r, dphi_c, dlam, dres = self.sens[param]
@@ -188,6 +214,13 @@ class _DirectBlock:
     def __call__(self, omega: np.ndarray) -> np.ndarray:
         H = self.model.full(omega)
         return H[:, self.rows][:, :, self.cols]
+
+    def frequency_derivative(self, omega: np.ndarray) -> np.ndarray:
+        """``dH/domega = -H (dZ/domega) H`` with ``dZ/domega = -2 omega M + i C``."""
+        m = self.model
+        H = m.full(omega)
+        w = np.asarray(omega, dtype=float)[:, None, None]
+        return -H[:, self.rows] @ (-2 * w * m.M + 1j * m.C) @ H[:, :, self.cols]
 
     def derivative(self, omega: np.ndarray, param: str) -> np.ndarray:
         m = self.model

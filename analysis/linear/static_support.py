@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from analysis.linear.receptance import frequency_derivative
+
 __all__ = ["StaticSupport"]
 
 
@@ -46,6 +48,11 @@ class _SupportedBlock:
             a, b, hdd = self._static_terms()
             H[static] -= self.stiffness * (a @ b) / (1.0 + self.stiffness * hdd)
         return H
+
+    def frequency_derivative(self, omega: np.ndarray) -> np.ndarray:
+        """``dH/domega``: the structure's. The support changes ``H`` at ``omega = 0`` alone,
+        where a balance's harmonic 0 sits whatever the frequency."""
+        return frequency_derivative(self.inner, omega)
 
     def derivative(self, omega: np.ndarray, param: str) -> np.ndarray:
         w = np.atleast_1d(np.asarray(omega, dtype=float))

@@ -181,10 +181,22 @@ class _System:
         return R.ravel(), J, prep, F, dF
 
     def d_omega(self, X: np.ndarray, omega: float) -> np.ndarray:
-        h = 1e-7 * omega
-        rp = self.residual(X, omega + h, False)[0]
-        rm = self.residual(X, omega - h, False)[0]
-        return (rp - rm) / (2 * h)
+        """``dR/domega`` at fixed ``X``: ``-dG/dw F - G dF/dw - dX_lin/dw``, the receptances'
+        derivatives exact (:meth:`HarmonicProblem.receptance_rates`), the forces' (through
+        the velocities) by central differences. Differencing the whole residual instead
+        evaluated the receptances at two new frequencies each time, most of a step's work."""
+        pb = self.pb
+        prep = _prepare(pb, omega, self.force)
+        rates = pb.receptance_rates(omega)
+        wb = prep["omega_b"]
+        h = 1e-7 * wb
+        F, _ = nonlinear_forces(pb, X, wb, False)
+        Fp, _ = nonlinear_forces(pb, X, wb + h, False)
+        Fm, _ = nonlinear_forces(pb, X, wb - h, False)
+        dF = (Fp - Fm) / (2 * h * pb.denominator)
+        Fk = prep["Fk"]
+        dX_lin = pb.basis.from_complex(np.matmul(rates["nf"], Fk[:, :, None])[:, :, 0])
+        return -(rates["G"] @ F.ravel()) - prep["G"] @ dF.ravel() - dX_lin.ravel()
 
 
 @dataclass

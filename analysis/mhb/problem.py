@@ -24,7 +24,7 @@ from fractions import Fraction
 import numpy as np
 
 from analysis.elements.base import NonlinearElement
-from analysis.linear.receptance import LinearModel
+from analysis.linear.receptance import LinearModel, frequency_derivative
 from analysis.mhb import kernels
 from analysis.mhb.harmonics import HarmonicBasis, base_denominator, order_indices
 
@@ -233,6 +233,15 @@ class HarmonicProblem:
             jacobian,
         )
         return F, dF if jacobian else None
+
+    def receptance_rates(self, omega: float) -> dict[str, np.ndarray]:
+        """Derivatives with respect to the base's frequency ``omega`` of what
+        :meth:`receptances` gives: ``G`` (the real operator of ``nn``) and ``nf``, each
+        harmonic's ``k / denominator dH/dw`` at ``w = k omega / denominator``."""
+        w = self.harmonic_omegas(omega)
+        rate = (np.arange(self.n_harmonics + 1) / self.denominator)[:, None, None]
+        dnn = frequency_derivative(self.blocks["nn"], w) * rate
+        return {"G": real_operator(dnn), "nf": frequency_derivative(self.blocks["nf"], w) * rate}
 
     def force_harmonics(self, force: np.ndarray) -> np.ndarray:
         """Spread force phasors per order, shape (n_orders, n_f), onto harmonics (H+1, n_f)."""

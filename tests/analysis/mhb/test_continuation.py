@@ -1,6 +1,7 @@
 """Continuation through folds and stability of the branches."""
 
 import numpy as np
+import pytest
 from scipy.optimize import fsolve
 
 from analysis.mhb.continuation import ContinuationSettings, continue_branch
@@ -60,3 +61,40 @@ def test_hill_exponents_agree_with_the_monodromy_matrix():
         assert h.stable == m.stable
         # piecewise-constant monodromy is first order in 1/N: 2 % of the damping rate
         assert abs(h.max_real - m.max_real) < 0.02 * 0.05 + 0.02 * abs(m.max_real)
+
+
+@pytest.mark.parametrize("case", ["contact chain", "paper model", "half order"])
+def test_the_residuals_frequency_derivative_equals_central_differences(case):
+    """The continuation's ``dR/domega`` (receptances differentiated exactly, forces by
+    differences) against central differences of the whole residual (Richardson-extrapolated
+    from two steps, error O(h^4)), to 1e-6 of its largest, at a solution in contact: on a
+    direct model, on the paper's model (modal, behind the shaker's static support) and with
+    a half order (the base frequency half the fundamental)."""
+    from fractions import Fraction
+
+    from analysis.mhb.continuation import _System
+    from analysis.mhb.solver import solve_point
+
+    from .systems import contact_chain
+
+    if case == "paper model":
+        from analysis.model import load_model
+        from analysis.system import build_problem
+
+        pb, w, force = build_problem(load_model()), 2 * np.pi * 26.0, np.array([8.0, 0.16, 0.16])
+    elif case == "contact chain":
+        pb, w, force = contact_chain(), 130.0, np.array([20.0, 0.4, 0.4])
+    else:
+        pb = duffing(k3=0.5, orders=(Fraction(1, 2), Fraction(1)), n_harmonics=6)
+        w, force = 1.3, np.array([0.05, 0.3])
+    p = solve_point(pb, w, force)
+    assert p.converged and np.abs(p.f_nl).max() > 0  # the element acts
+    sysm = _System(pb, force)
+    exact = sysm.d_omega(p.X, w)
+
+    def central(h):
+        return (sysm.residual(p.X, w + h, False)[0] - sysm.residual(p.X, w - h, False)[0]) / (2 * h)
+
+    h = 1e-5 * w
+    fd = (4 * central(h) - central(2 * h)) / 3
+    assert np.abs(exact - fd).max() <= 1e-6 * np.abs(fd).max()
