@@ -168,21 +168,26 @@ def newton(stamp: int):
     def newton(X0, G, X_lin, omega_b, codes, params, n_params, thresholds, L, basis, settings):
         """Damped Newton from ``X0``: ``X, R, F, dF``, the outcome (:data:`MESSAGES`), the
         iterations and the residual's largest coefficient, as ``solve_point`` computes them.
-        ``settings`` = (rtol, atol, max_iterations, stall_window, max_halvings)."""
+        ``settings`` = (rtol, atol, max_iterations, stall_window, max_halvings).
+
+        Written in loops but for the Jacobian's product and the solve: numba compiles each
+        numpy function it meets, and this kernel is compiled on a machine's first run."""
         stamp  # noqa: B018
         rtol, atol = settings[0], settings[1]
         max_it, window, halvings = int(settings[2]), int(settings[3]), int(settings[4])
         s, n = X_lin.shape
-        scale = max(np.abs(X_lin).max(), 1e-300)
-        X = X0.copy()
-        # the residual is written out twice, not called: every compiled layer re-optimises
-        # all it calls when it is compiled, seconds a layer on a machine's first run
-        F, De = _element_terms(X, omega_b, codes, params, n_params, thresholds, L, basis, True)
-        R = X - (G @ F.ravel()).reshape(s, n) - X_lin
-        rn = np.abs(R).max()
-        outcome, it = 1, 0
+        size = s * n
+        g, x_lin = G.ravel(), X_lin.ravel()  # coefficient-major, as G acts on them
+        jacobian = size > 0  # a boolean, not the literal True: one signature of the forces
+        scale = max(_max_abs(x_lin), 1e-300)
+        X = X0.copy().reshape(size)
+        F, De = _element_terms(
+            X.reshape(s, n), omega_b, codes, params, n_params, thresholds, L, basis, jacobian
+        )
+        R = _balance(X, g, F.ravel(), x_lin)
+        rn = _max_abs(R)
+        outcome, it, done = 1, 0, False
         history = np.empty(max_it + 1)
-        done = False
         for it in range(1, max_it + 1):
             if not np.isfinite(rn):
                 outcome, done = 2, True
@@ -191,26 +196,38 @@ def newton(stamp: int):
             if it > window and rn > 0.5 * history[it - 1 - window]:
                 outcome, done = 3, True
                 break
-            if rn <= rtol * max(np.abs(X).max(), scale) + atol:
+            if rn <= rtol * max(_max_abs(X), scale) + atol:
                 outcome, it, done = 0, it - 1, True
                 break
-            J = np.eye(s * n) - G @ _assemble(De, L)
+            J = G @ _assemble(De, L)
+            for a in range(size):
+                for b in range(size):
+                    J[a, b] = (1.0 if a == b else 0.0) - J[a, b]
             try:
-                dX = np.linalg.solve(J, -R.ravel()).reshape(s, n)
+                dX = np.linalg.solve(J, -R)
             except Exception:  # noqa: BLE001 - numba raises LinAlgError as Exception
                 outcome, done = 4, True
                 break
             # backtracking on |R| along the step; every trial with its Jacobian (it costs a
             # fraction of the forces, less than evaluating the trial taken a second time)
-            alpha, r2 = 1.0, np.sqrt(np.sum(R * R))
-            accepted = False
+            alpha, r2, accepted = 1.0, _norm(R), False
+            Xt = np.empty(size)
             for _ in range(halvings + 1):
-                Xt = X + alpha * dX
+                for a in range(size):
+                    Xt[a] = X[a] + alpha * dX[a]
                 Ft, Det = _element_terms(
-                    Xt, omega_b, codes, params, n_params, thresholds, L, basis, True
+                    Xt.reshape(s, n),
+                    omega_b,
+                    codes,
+                    params,
+                    n_params,
+                    thresholds,
+                    L,
+                    basis,
+                    jacobian,
                 )
-                Rt = Xt - (G @ Ft.ravel()).reshape(s, n) - X_lin
-                rt2 = np.sqrt(np.sum(Rt * Rt))
+                Rt = _balance(Xt, g, Ft.ravel(), x_lin)
+                rt2 = _norm(Rt)
                 if np.isfinite(rt2) and rt2 < (1 - 1e-4 * alpha) * r2:
                     accepted = True
                     break
@@ -219,9 +236,59 @@ def newton(stamp: int):
                 outcome, done = 5, True
                 break
             X, R, F, De = Xt, Rt, Ft, Det
-            rn = np.abs(R).max()
-        if not done and rn <= rtol * max(np.abs(X).max(), scale) + atol:
+            rn = _max_abs(R)
+        if not done and rn <= rtol * max(_max_abs(X), scale) + atol:
             outcome = 0
-        return X, R, F, _assemble(De, L), outcome, it, rn
+        return X.reshape(s, n), R.reshape(s, n), F, _assemble(De, L), outcome, it, rn
 
     return newton
+
+
+@_stamped
+def _balance(stamp: int):
+    @njit(cache=True)
+    def balance(x, g, f, x_lin):
+        """``R = x - G f - x_lin`` on flat coefficients (``g`` is ``G`` row by row)."""
+        stamp  # noqa: B018
+        size = x.size
+        R = np.empty(size)
+        for a in range(size):
+            acc = 0.0
+            for b in range(size):
+                acc += g[a * size + b] * f[b]
+            R[a] = x[a] - acc - x_lin[a]
+        return R
+
+    return balance
+
+
+@_stamped
+def _max_abs(stamp: int):
+    @njit(cache=True)
+    def max_abs(x):
+        """``max |x|`` of a flat array, NaN if one is NaN (as numpy's)."""
+        stamp  # noqa: B018
+        m = 0.0
+        for v in x:
+            a = abs(v)
+            if a > m:
+                m = a
+            elif a != a:
+                return a
+        return m
+
+    return max_abs
+
+
+@_stamped
+def _norm(stamp: int):
+    @njit(cache=True)
+    def norm(x):
+        """The 2-norm of a flat array."""
+        stamp  # noqa: B018
+        acc = 0.0
+        for v in x:
+            acc += v * v
+        return np.sqrt(acc)
+
+    return norm
