@@ -3,10 +3,11 @@
 #   make gui-deps  (as root, Debian/Ubuntu) the system packages the GUI needs: Qt's X11 (xcb)
 #                  plugin libraries, and Xvfb, xdotool, x11-utils and imagemagick, with which the
 #                  tests start the real GUI on a virtual display and take a screenshot
-#   make check     the fast tier: lint, format and type checks and the tests not marked slow or
-#                  hardware, on every core (under 2 minutes on a 2-core machine)
+#   make check     the fast tier: lint, format and type checks (beside them the balance's numba
+#                  code is compiled into numba's cache, make warm) and the tests not marked slow
+#                  or hardware, on every core (under 2 minutes on a 2-core machine)
 #   make test      the same checks and the whole test suite (as CI runs it)
-#   make demo | lint | bench | clean
+#   make demo | lint | warm | bench | clean
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
@@ -14,7 +15,7 @@ export OMP_NUM_THREADS ?= 1
 export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
-.PHONY: setup gui-deps demo check test lint bench clean
+.PHONY: setup gui-deps demo check test lint warm bench clean
 
 # Qt's offscreen platform (the tests), its X11 platform (libqxcb.so: rig/gui/qt_check.py names
 # the same libraries when one is missing), a virtual X server and the tools to drive it.
@@ -52,10 +53,17 @@ lint: setup
 	$(PY) -m ruff format --check .
 	$(PY) -m mypy
 
-check: lint
+# the balance's numba code compiled into numba's cache (python -m analysis.mhb.warmup) beside
+# the linters: the test processes then load it instead of each compiling it at the same time
+warm: setup
+	$(PY) -m analysis.mhb.warmup
+
+check: setup
+	$(MAKE) --no-print-directory -j2 lint warm
 	$(PYTEST) -m "not slow and not hardware"
 
-test: lint
+test: setup
+	$(MAKE) --no-print-directory -j2 lint warm
 	$(PYTEST) --durations=15
 
 bench: setup
