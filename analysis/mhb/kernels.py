@@ -244,51 +244,39 @@ def newton(stamp: int):
     return newton
 
 
-@_stamped
-def _balance(stamp: int):
-    @njit(cache=True)
-    def balance(x, g, f, x_lin):
-        """``R = x - G f - x_lin`` on flat coefficients (``g`` is ``G`` row by row)."""
-        stamp  # noqa: B018
-        size = x.size
-        R = np.empty(size)
-        for a in range(size):
-            acc = 0.0
-            for b in range(size):
-                acc += g[a * size + b] * f[b]
-            R[a] = x[a] - acc - x_lin[a]
-        return R
-
-    return balance
+# the small helpers below call nothing: numba's own key (their file) keeps them current
 
 
-@_stamped
-def _max_abs(stamp: int):
-    @njit(cache=True)
-    def max_abs(x):
-        """``max |x|`` of a flat array, NaN if one is NaN (as numpy's)."""
-        stamp  # noqa: B018
-        m = 0.0
-        for v in x:
-            a = abs(v)
-            if a > m:
-                m = a
-            elif a != a:
-                return a
-        return m
-
-    return max_abs
-
-
-@_stamped
-def _norm(stamp: int):
-    @njit(cache=True)
-    def norm(x):
-        """The 2-norm of a flat array."""
-        stamp  # noqa: B018
+@njit(cache=True)
+def _balance(x, g, f, x_lin):
+    """``R = x - G f - x_lin`` on flat coefficients (``g`` is ``G`` row by row)."""
+    size = x.size
+    R = np.empty(size)
+    for a in range(size):
         acc = 0.0
-        for v in x:
-            acc += v * v
-        return np.sqrt(acc)
+        for b in range(size):
+            acc += g[a * size + b] * f[b]
+        R[a] = x[a] - acc - x_lin[a]
+    return R
 
-    return norm
+
+@njit(cache=True)
+def _max_abs(x):
+    """``max |x|`` of a flat array, NaN if one is NaN (as numpy's)."""
+    m = 0.0
+    for v in x:
+        a = abs(v)
+        if a > m:
+            m = a
+        elif a != a:
+            return a
+    return m
+
+
+@njit(cache=True)
+def _norm(x):
+    """The 2-norm of a flat array."""
+    acc = 0.0
+    for v in x:
+        acc += v * v
+    return np.sqrt(acc)
