@@ -217,6 +217,8 @@ class SteppedSinePredictor:
         self.branch_tolerance = branch_tolerance
         self._linear_key: Any = None
         self._linear: Any = None
+        #: Modes (1-based) whose damping ratios are parameters of the derivatives (``zeta_4``).
+        self.damping_modes: tuple[int, ...] = ()
         #: Steps solved by stepping so far (every step of every pass, over all calls).
         self.steps_solved = 0
         #: Times each sweep (index among the needed ones) ended with a needed step unsolved
@@ -255,7 +257,9 @@ class SteppedSinePredictor:
             )
         )
         if key != self._linear_key:
-            lin = build_linear(model, f_max_hz=self.settings["f_max_hz"])
+            lin = build_linear(
+                model, f_max_hz=self.settings["f_max_hz"], damping_modes=self.damping_modes
+            )
             static = self.data.actuator.static_stiffness_n_per_m
             # The unmeasured mean force: the shaker holds the drive point (see StaticSupport).
             self._linear = StaticSupport(lin, self._force_dof, static) if static > 0 else lin

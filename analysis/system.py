@@ -29,7 +29,7 @@ DEFAULT_HARMONICS = 9
 DEFAULT_TIME_SAMPLES = 128
 
 
-def build_linear(model: Model, *, f_max_hz: float = 2000.0):
+def build_linear(model: Model, *, f_max_hz: float = 2000.0, damping_modes: Sequence[int] = ()):
     """The linear model (modal with residual flexibility, or direct if C is given or built
     from the model file's Rayleigh coefficients or damping matrix).
 
@@ -38,11 +38,19 @@ def build_linear(model: Model, *, f_max_hz: float = 2000.0):
     model : Model
     f_max_hz : float
         Highest retained mode [Hz]; the rest enters as residual flexibility.
+    damping_modes : sequence of int
+        Modes (1-based) whose damping ratios are parameters too (``zeta_4``; modal damping
+        only).
     """
     asm = model.assemble()
+    damping = None if asm.C is not None else model.damping_matrices()
+    if damping_modes and (asm.C is not None or damping is not None):
+        raise ValueError(
+            f"{model.source}: modal damping ratios {list(damping_modes)} as parameters need "
+            "modal damping; this model has a damping matrix"
+        )
     if asm.C is not None:
         return DirectLinearModel(asm.M, asm.C, asm.K, dM=asm.dM, dK=asm.dK)
-    damping = model.damping_matrices()
     if damping is not None:  # Rayleigh or an explicit C: no modal damping ratios to apply
         C, dC = damping
         return DirectLinearModel(asm.M, C, asm.K, dM=asm.dM, dC=dC, dK=asm.dK)
@@ -54,6 +62,7 @@ def build_linear(model: Model, *, f_max_hz: float = 2000.0):
         f_max_hz=f_max_hz,
         dM=asm.dM,
         dK=asm.dK,
+        damping_modes=damping_modes,
     )
 
 

@@ -13,16 +13,11 @@ import dataclasses
 import numpy as np
 
 from analysis.calibration.parameters import ParameterSpace
-from analysis.mhb.solver import solve_point
+from analysis.linear.receptance import ZETA, zeta_name
 from analysis.model import Model
 from analysis.predict_branches import BranchMatchedPredictor
 
 __all__ = ["ZETA", "DampedPredictor", "damped_space", "with_values", "zeta_name"]
-
-
-def zeta_name(mode: int) -> str:
-    """The parameter name of mode ``mode``'s damping ratio (1-based, as ``[damping.per_mode]``)."""
-    return f"{ZETA}{int(mode)}"
 
 
 def with_values(model: Model, values: dict[str, float]) -> Model:
@@ -36,19 +31,18 @@ def with_values(model: Model, values: dict[str, float]) -> Model:
     return out
 
 
-#: Prefix of a modal damping ratio calibrated with the parameters: ``"zeta_4"`` is mode 4's.
-ZETA = "zeta_"
-
-
 class DampedPredictor(BranchMatchedPredictor):
-    """A predictor whose parameters may include modal damping ratios (``zeta_<mode>``),
-    differentiated by finite differences: each step solved again with the ratio shifted,
-    started from its solution (Newton stays on the chosen branch and needs a few iterations;
-    solving the sweeps again would cost a whole prediction and could take another branch)."""
+    """A predictor whose parameters may include modal damping ratios (``zeta_<mode>``), with
+    exact derivatives: the receptances' own (``-phi phi^T 2 i w w_r g^2``,
+    :class:`~analysis.linear.receptance.ModalLinearModel`) through the balance's implicit
+    differentiation, as every structural parameter's."""
 
     def predict(self, values=None, params=(), rows=None):
         values = dict(values or {})
         zetas = {n: values.pop(n) for n in list(values) if n.startswith(ZETA)}
+        modes = tuple(sorted(int(n[len(ZETA) :]) for n in params if n.startswith(ZETA)))
+        if modes != self.damping_modes:  # a linear model (and solutions) with their derivatives
+            self.damping_modes, self._linear_key, self._last = modes, None, None
         base_model = self.model
         if zetas:
             per_mode = dict(base_model.damping.per_mode)
@@ -57,44 +51,9 @@ class DampedPredictor(BranchMatchedPredictor):
                 dataclasses.replace(base_model.damping, per_mode=per_mode)
             )
         try:
-            plain = [p for p in params if not p.startswith(ZETA)]
-            pred = super().predict(values, plain, rows)
-            for n in params:
-                if n.startswith(ZETA):
-                    pred.d_frf[n] = self._zeta_derivative(values, rows, pred, n, zetas[n])
-            return pred
+            return super().predict(values, params, rows)
         finally:
             self.model = base_model
-
-    def _zeta_derivative(self, values, rows, pred, name: str, zeta: float) -> np.ndarray:
-        """``d frf / d zeta`` by a forward difference of ``1e-3 zeta``, each step solved from
-        its solution (steps where that fails: the sweeps solved again at the shifted ratio)."""
-        model = self.model.with_values(values) if values else self.model
-        _, points = self.solve(model, rows=rows)  # the solutions just made (kept)
-        h = 1e-3 * zeta
-        per_mode = {**model.damping.per_mode, int(name[len(ZETA) :]): zeta + h}
-        shifted = model.with_damping(dataclasses.replace(model.damping, per_mode=per_mode))
-        pb = self.problem(shifted)
-        out = np.full_like(pred.frf, np.nan)
-        lost = []
-        for row, p in points.items():
-            if not p.converged:
-                continue
-            force = self._force_sign * self.drive_force[row][:, None]
-            q = solve_point(pb, p.omega, force, X0=p.X)
-            if q.converged:
-                out[row] = (self.frf_of(row, q)[0] - pred.frf[row]) / h
-            else:
-                lost.append(row)
-        if lost:
-            keep = self.model
-            self.model = keep.with_damping(shifted.damping)
-            try:
-                again = BranchMatchedPredictor.predict(self, values, (), rows)
-            finally:
-                self.model = keep
-            out[lost] = (again.frf[lost] - pred.frf[lost]) / h
-        return out
 
     def _linear_model(self, model):
         key = (tuple(sorted(model.damping.per_mode.items())), model.damping.default_zeta)

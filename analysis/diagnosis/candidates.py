@@ -232,6 +232,18 @@ class Candidate:
         ]
         if self.law.kind == "mass":
             return _add_mass(model, self.location, params[0]), [params[0].name]
+        if self.law.kind == "linear_spring" and model.frame is not None:
+            # a spring is part of the linear structure (in K, seen by the linear test), not
+            # an element of the balance; a missing spring adds stiffness (a structure too
+            # stiff is its own parameters' candidates)
+            stiffness = params[0]
+            spring = dataclasses.replace(
+                stiffness,
+                group="linear",
+                value=max(stiffness.value, 0.0),
+                lower=max(stiffness.lower, 0.0),
+            )
+            return _add_springs(model, self.key, self.location, spring), [spring.name]
         out = model
         if self.location.joint is not None:
             k = float(values.get("k_joint", 1e6))
@@ -320,6 +332,33 @@ def release_joint(
     return _edit(model, edit)
 
 
+def _add_springs(model: Model, key: str, location: Location, param: Parameter) -> Model:
+    """``model`` with a frame spring of stiffness parameter ``param`` at every incidence of
+    ``location`` (to ground, or between the incidence's two nodes in one direction)."""
+
+    def edit(doc):
+        springs = doc.setdefault("springs", [])
+        for i, (at, to) in enumerate(location.incidences):
+            if to is not None and to.direction != at.direction:
+                raise ValueError(
+                    f"a spring acts in one direction; {location.name} joins {at.direction} "
+                    f"of {at.node} to {to.direction} of {to.node}"
+                )
+            name = f"{key}_{i}" if len(location.incidences) > 1 else key
+            row = {"name": name, "node": at.node, "direction": at.direction, "k": param.name}
+            springs.append(row if to is None else {**row, "to": to.node})
+        _add_parameter(doc, param)
+
+    return _edit(model, edit)
+
+
+def _add_parameter(doc: dict, param: Parameter) -> None:
+    d = dataclasses.asdict(param)
+    d.pop("name")
+    unset = (None, math.inf, -math.inf)
+    doc["parameters"][param.name] = {k: v for k, v in d.items() if v not in unset}
+
+
 def _add_mass(model: Model, location: Location, param: Parameter) -> Model:
     node = location.incidences[0][0].node
 
@@ -327,10 +366,7 @@ def _add_mass(model: Model, location: Location, param: Parameter) -> Model:
         doc.setdefault("masses", []).append(
             {"name": param.name, "node": node, "m": param.name, "J": 0.0, "group": "added"}
         )
-        d = dataclasses.asdict(param)
-        d.pop("name")
-        unset = (None, math.inf, -math.inf)
-        doc["parameters"][param.name] = {k: v for k, v in d.items() if v not in unset}
+        _add_parameter(doc, param)
 
     return _edit(model, edit)
 

@@ -66,7 +66,12 @@ from analysis.diagnosis.candidates import (
     default_locations,
 )
 from analysis.diagnosis.compare import compare
-from analysis.diagnosis.linear_screen import LinearFit, LinearJob, run_linear_job
+from analysis.diagnosis.linear_screen import (
+    LinearFit,
+    LinearJob,
+    run_linear_job,
+    seen_by_linear_test,
+)
 from analysis.diagnosis.policy import FitSummary, Policy, simplest_of_next, tie_groups
 from analysis.diagnosis.readout import read_missing_force
 from analysis.diagnosis.result import Diagnosis, DiagnosisSettings, RankedCandidate
@@ -593,13 +598,9 @@ def _screen_step(
     meanwhile; the lead's verification started as soon as the screen has it."""
     st = jobs.st
     t1 = time.perf_counter()
-    nonlinear = [
-        c
-        for c in cands
-        if not (
-            jobs.linear_run is not None and c.law.kind in ("mass", "linear_spring", "joint_spring")
-        )
-    ]
+    # the candidates the linear test sees are tested there, the others screened
+    on_linear = [c for c in cands if jobs.linear_run is not None and seen_by_linear_test(c, model)]
+    nonlinear = [c for c in cands if c not in on_linear]
     # the screen's first pass shared with a worker; the recalibration and the linear
     # test's candidates on the workers meanwhile
     mine, theirs = (nonlinear[0::2], nonlinear[1::2]) if ex is not None else (nonlinear, [])
@@ -608,10 +609,9 @@ def _screen_step(
     refit_job = Deferred(ex, run_verify, jobs.verify(None))
     lin_jobs = []
     if jobs.linear_run is not None:
-        lin = [c for c in cands if c.law.kind in ("mass", "linear_spring", "joint_spring")]
         lin_jobs = [
             Deferred(ex, run_linear_job, LinearJob(jobs.text, jobs.source, jobs.linear_run, c))
-            for c in [None, *lin]
+            for c in [None, *on_linear]
         ]
     baseline = screen.baseline()
     fits = screen.first_pass(mine, say) + (share.result() if theirs else [])
@@ -748,18 +748,35 @@ def _continue_falling(run: _Verifying, further: list[int], jobs: _Jobs, ex, say:
 
 def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say: Listener) -> None:
     """From the best, where :meth:`Policy.walk_to` sends it: its law at the next measured
-    points by the screen, from the best's fit, or the next laws at its unmeasured location
-    (docs/diagnosis.md, the rules table)."""
+    points by the screen (a linear candidate's: by the linear test), from the best's fit, or
+    the next laws at its unmeasured location (docs/diagnosis.md, the rules table)."""
     done, origin = run.done, run.origin
     best = _best_index(run)
     if best is None:
         return
     lead = origin[best]
-    kind = lead.candidate.location.kind if isinstance(lead, ScreenFit) else None
+    kind = lead.candidate.location.kind
     walk_to = run.policy.walk_to(kind, FitSummary.of(done[best]))
     if not walk_to:
         return
     tried = [o.candidate for o in origin]
+    if isinstance(lead, LinearFit):
+        if walk_to != "points":
+            return
+        # a mass or a spring at a point: at the next points by the linear test, each from its
+        # own recalibration there (the linear test ranks neighbouring points loosely: a spring
+        # near a cantilever's tip acts on its first mode as one further in with more stiffness)
+        nxt = [
+            f
+            for f in sc.lin_fits
+            if f.candidate.law == lead.candidate.law
+            and f.candidate.location.kind == kind
+            and f.candidate not in tried
+            and not f.failed
+        ][: run.st.n_walk]
+        say(StageDone("neighbours", count=len(nxt)))
+        _verify_linear_walk(run, nxt, jobs, ex)
+        return
     if walk_to == "points":
         walk = _walk_jobs(done[best], sc.fits, tried, run.st.n_walk)
         say(StageDone("neighbours", count=len(walk)))
@@ -768,6 +785,22 @@ def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say: Listen
         walk = [(f, f.values, f.known) for f in laws]
         say(StageDone("other laws", count=len(walk)))
     _verify_walk(run, walk, jobs, ex)
+
+
+def _verify_linear_walk(run: _Verifying, fits: list[LinearFit], jobs: _Jobs, ex) -> None:
+    """Verify linear candidates, each from its linear test's recalibration, and add them."""
+    more = [
+        Deferred(
+            ex,
+            run_verify,
+            dataclasses.replace(
+                jobs.verify(f.candidate, start_toml=f.model_toml), give_up_chi2=run.bar
+            ),
+        )
+        for f in fits
+    ]
+    run.done += [p.result() for p in more]
+    run.origin += fits
 
 
 def _verify_walk(run: _Verifying, walk: list, jobs: _Jobs, ex) -> None:

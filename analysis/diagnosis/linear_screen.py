@@ -20,20 +20,35 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from analysis.diagnosis.candidates import Candidate
 from analysis.events import Listener, StageDone
 from analysis.measurement_file import read_measurement
 from analysis.model import Model
 
-__all__ = ["LINEAR_SCREEN_KINDS", "LinearFit", "LinearJob", "linear_screen", "run_linear_job"]
+__all__ = [
+    "LINEAR_SCREEN_KINDS",
+    "LinearFit",
+    "LinearJob",
+    "linear_screen",
+    "run_linear_job",
+    "seen_by_linear_test",
+]
 
 log = logging.getLogger(__name__)
 
 #: Candidate kinds that change the mass or stiffness matrices (what the linear test sees).
 LINEAR_SCREEN_KINDS = ("mass", "linear_spring", "joint_spring")
 
-#: Start values of a linear candidate's parameters.
+#: Start values of a linear candidate's parameters (a spring's: :data:`SPRING_START` of the
+#: structure's own stiffness where it acts).
 START = {"m": 0.01, "k": 1e3, "k_joint": 1e6}
+
+#: A spring candidate starts at this share of the static stiffness of the structure at its
+#: place (``1 / d' K^-1 d``, ``d`` its incidence); its bounds then reach that stiffness
+#: itself (100 times the start), beyond which a spring acts as a support.
+SPRING_START = 0.01
 
 
 @dataclass(frozen=True)
@@ -97,6 +112,27 @@ def _bic(cost: float, n: int, k: int) -> float:
     return n * math.log(rss / n) + k * math.log(n)
 
 
+def seen_by_linear_test(cand: Candidate, model: Model) -> bool:
+    """Whether ``cand`` changes the mass or stiffness matrices of ``model`` (what the linear
+    test sees): a mass, a compliant joint, a spring of a frame model (a model given by
+    matrices takes a spring only as an element of the balance)."""
+    if cand.law.kind == "linear_spring":
+        return model.frame is not None
+    return cand.law.kind in LINEAR_SCREEN_KINDS
+
+
+def local_stiffness(model: Model, cand: Candidate) -> float:
+    """Static stiffness of the structure at ``cand``'s first incidence, ``1 / d' K^-1 d``
+    (``d`` the unit relative displacement there) [N/m or N m/rad]."""
+    asm = model.assemble()
+    at, to = cand.location.incidences[0]
+    d = np.zeros(asm.K.shape[0])
+    d[asm.dof_index(at.node, at.direction)] = 1.0
+    if to is not None:
+        d[asm.dof_index(to.node, to.direction)] -= 1.0
+    return 1.0 / float(d @ np.linalg.solve(asm.K, d))
+
+
 def run_linear_job(job: LinearJob) -> LinearFit:
     """Recalibrate one model on the linear test (top level, so executors can run it)."""
     from analysis.calibration.linear import calibrate_linear
@@ -109,6 +145,8 @@ def run_linear_job(job: LinearJob) -> LinearFit:
         if cand is not None:
             names = cand.parameter_names()
             start = {p: START.get(p, 1.0) for p in names}
+            if cand.law.kind == "linear_spring":
+                start["k"] = SPRING_START * local_stiffness(model, cand)
             model, new = cand.apply(model, start)
         names = tuple(model.parameter_names(group="linear", calibrate=True))
         run = read_measurement(job.run_path)
@@ -157,8 +195,8 @@ def linear_screen(
     run_path : str
         The random-excitation file.
     candidates : sequence of Candidate
-        Those of kinds :data:`LINEAR_SCREEN_KINDS` are tried (one mass, spring or compliant
-        joint each; a released joint is tried once, whatever law it carries).
+        Those the linear test sees (:func:`seen_by_linear_test`) are tried (one mass, spring
+        or compliant joint each; a released joint is tried once, whatever law it carries).
     executor : Executor, optional
         Default: in this process.
 
@@ -171,7 +209,7 @@ def linear_screen(
     """
     from analysis.executors import run_jobs
 
-    cands = [c for c in candidates if c.law.kind in LINEAR_SCREEN_KINDS]
+    cands = [c for c in candidates if seen_by_linear_test(c, model)]
     text, source = model.to_toml(), str(model.source)
     jobs = [LinearJob(text, source, str(run_path), None)]
     jobs += [LinearJob(text, source, str(run_path), c) for c in cands]

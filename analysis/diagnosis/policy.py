@@ -156,12 +156,13 @@ class Policy:
     # -- after the first verifications --------------------------------------------------------
 
     def walk_to(self, kind: str | None, best: FitSummary) -> Walk:
-        """Where the best verified candidate goes on: ``kind`` is its location's kind (None for
-        a linear candidate, which has nowhere to go). From a measured point (``"point"``), its
-        law at the next points when it explains the misfit or went most of the way; from an
-        unmeasured location, the next laws there, even at the noise: look-alike laws there
-        screen alike (the screen reads the place's states coarsely), so the first verified is
-        not yet the best, and only the fit orders them or says they tie."""
+        """Where the best verified candidate goes on: ``kind`` is its location's kind (None:
+        nowhere). From a measured point (``"point"``), its law at the next points when it
+        explains the misfit or went most of the way; from an unmeasured location, the next
+        laws there, even at the noise: look-alike laws there screen alike (the screen reads
+        the place's states coarsely), so the first verified is not yet the best, and only the
+        fit orders them or says they tie. (A linear candidate, ranked by the linear test and
+        not by the screen, goes on from a point only, to its law at the next points.)"""
         if kind is None or best.failed:
             return None
         rms = best.rms_over_noise

@@ -15,6 +15,7 @@ sec. 11.4 (mode acceleration / residual flexibility).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -23,12 +24,22 @@ import numpy as np
 from analysis.linear.modal import Modes, modal_analysis, mode_sensitivities
 
 __all__ = [
+    "ZETA",
     "DirectLinearModel",
     "LinearModel",
     "ModalLinearModel",
     "ReceptanceBlock",
     "frequency_derivative",
+    "zeta_name",
 ]
+
+#: Prefix of a modal damping ratio as a parameter: ``"zeta_4"`` is mode 4's.
+ZETA = "zeta_"
+
+
+def zeta_name(mode: int) -> str:
+    """The parameter name of mode ``mode``'s damping ratio (1-based, as ``[damping.per_mode]``)."""
+    return f"{ZETA}{int(mode)}"
 
 
 class ReceptanceBlock(Protocol):
@@ -78,6 +89,7 @@ class _ModalBlock:
     zeta_r: np.ndarray  # (m,)
     residual: np.ndarray  # (nr, nc)
     sens: dict = field(default_factory=dict)  # param -> (dphi_r, dphi_c, dlam, dres)
+    zeta: dict = field(default_factory=dict)  # damping ratio name -> retained mode or None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -100,6 +112,8 @@ class _ModalBlock:
         return np.einsum("im,wm,jm->wij", self.phi_r, dg, self.phi_c)
 
     def derivative(self, omega: np.ndarray, param: str) -> np.ndarray:
+        if param in self.zeta:
+            return self._zeta_derivative(omega, self.zeta[param])
         dphi_r, dphi_c, dlam, dres = self.sens[param]
         w = np.asarray(omega, dtype=float)[:, None]
         g = self._g(omega)
@@ -109,6 +123,18 @@ class _ModalBlock:
         out += np.einsum("im,wm,jm->wij", self.phi_r, g, dphi_c)
         out += np.einsum("im,wm,jm->wij", self.phi_r, dg, self.phi_c)
         return out + dres
+
+    def _zeta_derivative(self, omega: np.ndarray, mode: int | None) -> np.ndarray:
+        """``dH/dzeta_r = -phi_r phi_r^T 2 i w w_r g_r^2`` of retained mode ``mode``; a mode
+        in the residual flexibility is static, its damping enters nowhere."""
+        w = np.asarray(omega, dtype=float)
+        out = np.zeros((w.size, *self.shape), complex)
+        if mode is not None:
+            wr = self.omega_r[mode]
+            g = 1.0 / (wr**2 - w**2 + 2j * self.zeta_r[mode] * wr * w)
+            dg = -(g**2) * 2j * wr * w
+            out += dg[:, None, None] * np.outer(self.phi_r[:, mode], self.phi_c[:, mode])
+        return out
 
 
 class ModalLinearModel:
@@ -124,6 +150,9 @@ class ModalLinearModel:
         Modes up to this frequency are retained; the rest enter as residual flexibility.
     dM, dK : dict name -> ndarray, optional
         Parameter derivatives for sensitivities (modal damping ratios held fixed).
+    damping_modes : sequence of int, optional
+        Modes (1-based) whose damping ratios are parameters too, named :func:`zeta_name`
+        (``zeta_4``), with exact derivatives.
     """
 
     def __init__(
@@ -136,6 +165,7 @@ class ModalLinearModel:
         f_max_hz: float = 2000.0,
         dM: dict[str, np.ndarray] | None = None,
         dK: dict[str, np.ndarray] | None = None,
+        damping_modes: Sequence[int] = (),
     ) -> None:
         self.M = np.asarray(M, dtype=float)
         self.K = np.asarray(K, dtype=float)
@@ -154,7 +184,10 @@ class ModalLinearModel:
         )
         self.dM = dict(dM or {})
         self.dK = dict(dK or {})
-        self.param_names = tuple(self.dK)
+        # a damping ratio's mode among the retained ones (None: in the residual flexibility)
+        retained = {int(m) + 1: i for i, m in enumerate(keep)}
+        self.zeta = {zeta_name(m): retained.get(int(m)) for m in damping_modes}
+        self.param_names = tuple(self.dK) + tuple(self.zeta)
         self._sens: tuple[dict, dict] | None = None
         self._R_high: np.ndarray | None = None
 
@@ -182,12 +215,17 @@ class ModalLinearModel:
         phi = self.modes.phi
         R = self._high_flexibility()
         blk = _ModalBlock(
-            phi[rows], phi[cols], self.modes.omega, self.modes.zeta, R[np.ix_(rows, cols)].copy()
+            phi[rows],
+            phi[cols],
+            self.modes.omega,
+            self.modes.zeta,
+            R[np.ix_(rows, cols)].copy(),
+            zeta=dict(self.zeta),
         )
-        if self.param_names:
+        if self.dK:
             dlam, dphi = self._mode_sens()
             M = self.M
-            for p in self.param_names:
+            for p in self.dK:
                 dK = self.dK[p]
                 dM = self.dM.get(p)
                 dX = dphi[p]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from analysis.diagnosis.candidates import Candidate, Law, default_candidates, default_laws
@@ -204,3 +205,34 @@ def test_the_look_alike_places_of_a_place(reference_model) -> None:
     assert alike("point 7 to right_top y") == {"point 7"}
     assert alike("point 5") == set()  # no node of another member within reach
     assert alike("joint clamp rz") == set()
+
+
+def test_a_linear_spring_is_a_spring_of_the_frame(reference_model, tmp_path) -> None:
+    """A linear spring enters the stiffness matrix (what the linear test sees), to ground or
+    between two nodes, one spring per incidence sharing one parameter; never below zero."""
+    cands = default_candidates(reference_model, scope="structure")
+    K0 = reference_model.assemble().K
+    point, new = _find(cands, "linear_spring at point 5").apply(reference_model, {"k": 2.5e3})
+    assert new == ["k_linear_spring_point_5"] and point.nonlinear == reference_model.nonlinear
+    assert point.parameters[new[0]].group == "linear" and point.parameters[new[0]].lower == 0.0
+    asm = point.assemble()
+    i = asm.dof_index("p5", "y")
+    dK = asm.K - K0
+    assert dK[i, i] == pytest.approx(2.5e3, rel=1e-12)
+    dK[i, i] = 0.0
+    assert np.abs(dK).max() <= 1e-9 * np.abs(K0).max()
+    # between two nodes: +k on each diagonal, -k between them
+    pair = _find(cands, "linear_spring at point 9 to point 10 x")
+    m2, _ = pair.apply(reference_model, {"k": 4e3})
+    asm = m2.assemble()
+    a, b = asm.dof_index("p9", "x"), asm.dof_index("p10", "x")
+    dK = asm.K - K0
+    assert dK[np.ix_([a, b], [a, b])] == pytest.approx(np.array([[4e3, -4e3], [-4e3, 4e3]]))
+    # a group: one spring at each of its four places, one parameter
+    group, new = _find(cands, "linear_spring at springs k_mount").apply(reference_model, {"k": 1e3})
+    assert len(group.frame.springs) == len(reference_model.frame.springs) + 4 and len(new) == 1
+    # a screen's estimate below zero starts at zero; the model file round-trips
+    neg, new = _find(cands, "linear_spring at point 5").apply(reference_model, {"k": -3e3})
+    assert neg.parameters[new[0]].value == 0.0
+    back = load_model(neg.save(tmp_path / "spring.toml"))
+    assert back.parameters[new[0]].value == 0.0

@@ -186,10 +186,11 @@ def test_starts_that_cannot_be_the_best_are_stopped_and_the_fit_is_the_same(
 
 @pytest.mark.slow
 def test_the_damping_derivative_is_that_of_solving_the_sweeps_again(runs, reference_model) -> None:
-    """A modal damping ratio's derivative: each step solved at the shifted ratio from its own
-    solution gives the forward difference of solving the whole sweeps again there (to 1e-5 of
-    the largest; the two differ by Newton's tolerance over the step), on every step, and
-    agrees with a central difference to the forward difference's own error (1 %)."""
+    """A modal damping ratio's exact derivative (the receptances' own, through the balance's
+    implicit differentiation) against central differences of solving the whole sweeps again
+    at the shifted ratio (steps of 1e-4 of the ratio: near the fold at 26.5 Hz, 5 N, a step of
+    1e-3 leaves a curvature error of 1 %), on every step, with a friction joint on the
+    measured branch: within 1e-4 of the largest (3e-5 measured)."""
     import dataclasses
 
     from analysis.calibration.modal_damping import DampedPredictor
@@ -205,22 +206,24 @@ def test_the_damping_derivative_is_that_of_solving_the_sweeps_again(runs, refere
     rows = calibration_rows(data)
     zeta = model.damping.per_mode.get(4, model.damping.default_zeta)
     pred = DampedPredictor(model, data).predict({"zeta_4": zeta}, [*names, "zeta_4"], rows)
-    fast = pred.d_frf["zeta_4"]
+    exact = pred.d_frf["zeta_4"]
 
     def at(z):
         per_mode = {**model.damping.per_mode, 4: z}
         m = model.with_damping(dataclasses.replace(model.damping, per_mode=per_mode))
         return BranchMatchedPredictor(m, data).predict(None, (), rows).frf
 
-    h = 1e-3 * zeta
-    forward = (at(zeta + h) - pred.frf) / h
+    h = 1e-4 * zeta
     central = (at(zeta + h) - at(zeta - h)) / (2 * h)
-    ok = np.isfinite(pred.frf)
+    ok = np.isfinite(pred.frf) & np.isfinite(central)
     assert ok[rows].sum() > 0.9 * ok[rows].size
-    assert np.isfinite(fast[ok]).all()
-    scale = np.abs(forward[ok]).max()
-    assert np.abs(fast[ok] - forward[ok]).max() < 1e-5 * scale
-    assert np.abs(fast[ok] - central[ok]).max() < 1e-2 * scale
+    assert np.isfinite(exact[ok]).all()
+    scale = np.abs(central[ok]).max()
+    assert np.abs(exact[ok] - central[ok]).max() < 1e-4 * scale
+    # the other parameters' derivatives are those of a predictor without damping ratios
+    plain = BranchMatchedPredictor(model, data).predict(None, names, rows)
+    for n in names:
+        assert np.allclose(pred.d_frf[n][ok], plain.d_frf[n][ok], rtol=1e-9, atol=0)
 
 
 def test_a_stopped_fit_ends_at_its_last_iterate_and_says_why() -> None:
