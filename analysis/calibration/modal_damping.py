@@ -37,12 +37,16 @@ class DampedPredictor(BranchMatchedPredictor):
     :class:`~analysis.linear.receptance.ModalLinearModel`) through the balance's implicit
     differentiation, as every structural parameter's."""
 
-    def predict(self, values=None, params=(), rows=None):
+    def predict(self, values=None, params=(), rows=None, **kw):
         values = dict(values or {})
         zetas = {n: values.pop(n) for n in list(values) if n.startswith(ZETA)}
-        modes = tuple(sorted(int(n[len(ZETA) :]) for n in params if n.startswith(ZETA)))
-        if modes != self.damping_modes:  # a linear model (and solutions) with their derivatives
-            self.damping_modes, self._linear_key, self._last = modes, None, None
+        asked = {int(n[len(ZETA) :]) for n in params if n.startswith(ZETA)}
+        if not asked <= set(self.damping_modes):
+            # a linear model (and solutions) with their derivatives; kept for the calls
+            # without derivatives (a fit's trial steps), whose solutions a fit's next call
+            # with them reuses
+            self.damping_modes = tuple(sorted(asked | set(self.damping_modes)))
+            self._linear_key, self._last = None, None
         base_model = self.model
         if zetas:
             per_mode = dict(base_model.damping.per_mode)
@@ -51,7 +55,7 @@ class DampedPredictor(BranchMatchedPredictor):
                 dataclasses.replace(base_model.damping, per_mode=per_mode)
             )
         try:
-            return super().predict(values, params, rows)
+            return super().predict(values, params, rows, **kw)
         finally:
             self.model = base_model
 

@@ -224,6 +224,14 @@ def test_the_damping_derivative_is_that_of_solving_the_sweeps_again(runs, refere
     plain = BranchMatchedPredictor(model, data).predict(None, names, rows)
     for n in names:
         assert np.allclose(pred.d_frf[n][ok], plain.d_frf[n][ok], rtol=1e-9, atol=0)
+    # a fit's trial step (no derivatives) and then the derivatives at it: solved once
+    dp = DampedPredictor(model, data)
+    dp.predict({"zeta_4": zeta}, [*names, "zeta_4"], rows)
+    trial = {"zeta_4": 1.1 * zeta, names[0]: 1.05 * model.parameters[names[0]].value}
+    dp.predict(trial, (), rows)
+    solved = dp.steps_solved
+    again = dp.predict(trial, [*names, "zeta_4"], rows)
+    assert dp.steps_solved == solved and np.isfinite(again.d_frf["zeta_4"][ok]).all()
 
 
 def test_a_stopped_fit_ends_at_its_last_iterate_and_says_why() -> None:
