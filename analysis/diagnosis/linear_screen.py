@@ -46,8 +46,9 @@ LINEAR_SCREEN_KINDS = ("mass", "linear_spring", "joint_spring")
 START = {"m": 0.01, "k": 1e3, "k_joint": 1e6}
 
 #: A spring candidate starts at this share of the static stiffness of the structure at its
-#: place (``1 / d' K^-1 d``, ``d`` its incidence); its bounds then reach that stiffness
-#: itself (100 times the start), beyond which a spring acts as a support.
+#: place (``1 / d' K^-1 d``, ``d`` its incidence); its bounds (0 to 1000 times the start, as
+#: every new linear coefficient's) then reach ten times that stiffness, where a spring acts
+#: as a support.
 SPRING_START = 0.01
 
 

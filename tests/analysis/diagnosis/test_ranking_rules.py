@@ -70,3 +70,59 @@ def test_the_refinements_of_a_kind_are_every_law_at_its_best_locations() -> None
     kept = {f.candidate.location.name for f in leaders}
     assert kept == {f"spring {i}" for i in range(5)[-REFINED_LOCATIONS:]}
     assert len(leaders) == REFINED_LOCATIONS * len(laws)
+
+
+def test_the_best_linear_candidate_at_a_point_walks_to_the_linear_tests_next_points(
+    reference_model, monkeypatch
+) -> None:
+    """A spring at a point that explains the misfit goes on to the same law at the linear
+    test's next two points (by its ranking, masses and the joint's spring left aside), each
+    verified from its own recalibration on the linear test; one at a joint goes nowhere."""
+    import importlib
+
+    from analysis.diagnosis.candidates import default_candidates
+    from analysis.diagnosis.linear_screen import LinearFit
+    from analysis.diagnosis.policy import FitSummary, Policy
+    from analysis.diagnosis.verify import Verified
+
+    dg = importlib.import_module("analysis.diagnosis.diagnose")  # the package names a function so
+    cands = {c.label: c for c in default_candidates(reference_model)}
+    order = [
+        "linear_spring at point 7",
+        "mass at point 6",
+        "linear_spring at point 6",
+        "compliant joint clamp rz (linear spring)",
+        "linear_spring at point 5",
+        "linear_spring at point 4",
+    ]
+    lin_fits = [
+        LinearFit(cands[label], 1.0 + i, 100, 6, float(i), model_toml=f"toml of {label}")
+        for i, label in enumerate(order)
+    ]
+
+    def verified(cand, chi2_per_dof: float) -> Verified:
+        return Verified(cand, {}, np.full(N_STEPS, chi2_per_dof * PER_STEP), PER_STEP, "")
+
+    asked = []
+
+    def fake_verify(job):
+        asked.append(job)
+        return verified(job.candidate, 1.2)
+
+    monkeypatch.setattr(dg, "run_verify", fake_verify)
+    st = DiagnosisSettings()
+    refit = verified(None, 400.0)
+    jobs = dg._Jobs("model text", "source", "data.h5", "linear.h5", st)
+    sc = SimpleNamespace(lin_fits=lin_fits, fits=[], screen=None)
+    for first, walked in ((0, ["linear_spring at point 6", "linear_spring at point 5"]), (3, [])):
+        asked.clear()
+        run = dg._Verifying(
+            [lin_fits[first]],
+            [verified(lin_fits[first].candidate, 1.0)],
+            refit,
+            Policy(st, FitSummary.of(refit)),
+        )
+        dg._walk_from_best(run, sc, jobs, None, lambda event: None)
+        assert [o.candidate.label for o in run.origin[1:]] == walked
+        assert [j.start_toml for j in asked] == [f"toml of {label}" for label in walked]
+        assert len(run.done) == 1 + len(walked)
