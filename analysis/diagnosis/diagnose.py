@@ -789,32 +789,20 @@ def _walk_from_best(run: _Verifying, sc: _Screened, jobs: _Jobs, ex, say: Listen
 
 def _verify_linear_walk(run: _Verifying, fits: list[LinearFit], jobs: _Jobs, ex) -> None:
     """Verify linear candidates, each from its linear test's recalibration, and add them."""
-    more = [
-        Deferred(
-            ex,
-            run_verify,
-            dataclasses.replace(
-                jobs.verify(f.candidate, start_toml=f.model_toml), give_up_chi2=run.bar
-            ),
-        )
-        for f in fits
-    ]
-    run.done += [p.result() for p in more]
-    run.origin += fits
+    _verify_more(run, fits, [jobs.verify(f.candidate, start_toml=f.model_toml) for f in fits], ex)
 
 
 def _verify_walk(run: _Verifying, walk: list, jobs: _Jobs, ex) -> None:
     """Verify ``[(ScreenFit, values, known)]``, each from its given values, and add them."""
-    more = [
-        Deferred(
-            ex,
-            run_verify,
-            dataclasses.replace(jobs.verify(f.candidate, values, known), give_up_chi2=run.bar),
-        )
-        for f, values, known in walk
-    ]
+    vjobs = [jobs.verify(f.candidate, values, known) for f, values, known in walk]
+    _verify_more(run, [f for f, _, _ in walk], vjobs, ex)
+
+
+def _verify_more(run: _Verifying, origins: list, vjobs: list[VerifyJob], ex) -> None:
+    """Run ``vjobs`` (verifying ``origins``) against the stage's bar and add them."""
+    more = [Deferred(ex, run_verify, dataclasses.replace(j, give_up_chi2=run.bar)) for j in vjobs]
     run.done += [p.result() for p in more]
-    run.origin += [f for f, _, _ in walk]
+    run.origin += origins
 
 
 def look_alike_places(where: Location, places) -> list[Location]:
