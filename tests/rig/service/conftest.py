@@ -4,7 +4,8 @@
 child process) on a free port with a temporary service directory and lock directory, and
 waits until it has written its endpoint; every process it or a test starts through
 :class:`Procs` is ended when the test (or module) ends, and the teardown fails if one had to be
-killed. The bench is the reference setup at 5120 Hz, so the paper plan runs in about 15 s.
+killed. The bench is the reference setup at 5120 Hz with a cut paper plan (``paper_cut.toml``:
+the paper's settings and limits, 60 steps), long enough to pause, stop and kill mid-run.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from pathlib import Path
 import pytest
 import tomli_w
 
+from rig.config.plans import load_plan
 from rig.config.setup import load_setup
 from rig.service.client import ServiceClient
 
@@ -30,6 +32,8 @@ ENV = {
 }
 ENV["OMP_NUM_THREADS"] = "1"
 FS_TEST = 5120.0
+#: The cut paper plan's steps: 21-40 Hz in 1 Hz steps at 2, 4 and 8 N.
+CUT_STEPS = 60
 
 
 class Procs:
@@ -167,12 +171,18 @@ class ServiceProcess:
 def bench(tmp_path_factory) -> Path:
     """A folder with the bench: the reference setup at 5120 Hz, its impedance head's
     accelerometer at 10 mV/g (the 100 mV/g one clips near the contact resonance at 8 N when a
-    resumed run's controller takes another path there)."""
+    resumed run's controller takes another path there), and the paper plan cut to
+    :data:`CUT_STEPS` steps through the contact (``paper_cut.toml``)."""
     d = tmp_path_factory.mktemp("bench")
     setup = load_setup("reference").with_sample_rate(FS_TEST).to_dict()
     acc3 = next(c for c in setup["channels"] if c["name"] == "acc3")
     acc3["sensitivity"] = 10.13
     (d / "setup.toml").write_bytes(tomli_w.dumps(setup).encode())
+    plan = load_plan("paper").to_dict()
+    plan["name"] = "paper_cut"
+    plan["excitation"]["levels_n"] = [2.0, 4.0, 8.0]
+    plan["frequencies"]["ranges"] = [{"start_hz": 21.0, "stop_hz": 40.0, "step_hz": 1.0}]
+    (d / "paper_cut.toml").write_bytes(tomli_w.dumps(plan).encode())
     return d
 
 

@@ -1,6 +1,6 @@
 """The acquisition service end to end: real processes, real loopback sockets, real files.
 
-One service (``shared_service``) takes the paper plan from one client, is watched by three
+One service (``shared_service``) takes the cut paper plan from one client, is watched by three
 others (one of them killed), pauses, resumes, aborts and completes the run; a second run waits
 in the queue; requests without the token or with a wrong one are refused and change nothing.
 Other services are started, stopped mid-run, killed and restarted to show that the completed
@@ -22,9 +22,7 @@ import pytest
 from analysis.measurement_file import read_measurement
 from rig.service.client import AuthenticationError, ServiceClient, ServiceError
 from rig.service.launch import ensure_service
-from tests.rig.service.conftest import rig, wait_for
-
-PAPER_STEPS = 224
+from tests.rig.service.conftest import CUT_STEPS, rig, wait_for
 
 
 def _raw(svc, method, path, headers=None, body=None):
@@ -219,17 +217,17 @@ def _resume_completes(svc, client, run_a, run_b, held, n_aborted: int, data) -> 
         client.run(run_a)["message"],
     )
     assert [e["seq"] for e in more] == list(range(last_seq + 1, last_seq + 1 + len(more)))
-    assert [e["type"] for e in more].count("StepFinished") == PAPER_STEPS - n_aborted
+    assert [e["type"] for e in more].count("StepFinished") == CUT_STEPS - n_aborted
     record = client.run(run_a)
     assert record["state"] == "success" and record["attempts"] == 2
     done = read_measurement(record["path"])
-    assert done.complete and done.exit_status == "success" and done.n_steps == PAPER_STEPS
-    assert sorted(done.plan_index) == list(range(PAPER_STEPS))
+    assert done.complete and done.exit_status == "success" and done.n_steps == CUT_STEPS
+    assert sorted(done.plan_index) == list(range(CUT_STEPS))
     np.testing.assert_array_equal(done.frequency_hz[:n_aborted], data.frequency_hz)
 
     result = client.result(run_a)
-    assert result["exists"] and result["summary"]["n_done"] == PAPER_STEPS
-    assert result["summary"]["written_this_run"] == PAPER_STEPS - n_aborted
+    assert result["exists"] and result["summary"]["n_done"] == CUT_STEPS
+    assert result["summary"]["written_this_run"] == CUT_STEPS - n_aborted
     assert result["summary"]["wall_s"] > 0 and result["summary"]["rig_time_s"] > 0
     r = svc.cli("list", "--json")
     states = {x["id"]: x["state"] for x in json.loads(r.stdout)}
@@ -238,10 +236,13 @@ def _resume_completes(svc, client, run_a, run_b, held, n_aborted: int, data) -> 
 
 @pytest.mark.slow
 @pytest.mark.timeout(150)
-def test_paper_run_watched_by_three_paused_aborted_and_resumed(shared_service, procs, tmp_path):
+def test_paper_run_watched_by_three_paused_aborted_and_resumed(
+    shared_service, procs, bench, tmp_path
+):
     svc = shared_service
     client = svc.client()
-    r = svc.cli("submit", "paper", "--label", "paper at 5120 Hz", "--json")
+    plan = bench / "paper_cut.toml"
+    r = svc.cli("submit", plan, "--label", "paper cut, at 5120 Hz", "--json")
     assert r.returncode == 0, r.stderr
     run_a = json.loads(r.stdout)["id"]
     run_b = client.submit("quick", label="second")
@@ -265,7 +266,7 @@ def test_paper_run_watched_by_three_paused_aborted_and_resumed(shared_service, p
     assert r.returncode == 0, r.stderr
     wait_for(lambda: client.run(run_a)["state"] == "paused", 20, "the run to pause")
     n_paused = client.run(run_a)["n_done"]
-    assert 3 <= n_paused < PAPER_STEPS
+    assert 3 <= n_paused < CUT_STEPS
     time.sleep(1.0)
     record = client.run(run_a)
     assert record["state"] == "paused" and record["n_done"] == n_paused
@@ -279,7 +280,7 @@ def test_paper_run_watched_by_three_paused_aborted_and_resumed(shared_service, p
     record = client.wait(run_a, 30)
     assert record["state"] == "aborted" and record["resumable"]
     n_aborted = record["n_done"]
-    assert n_paused + 3 <= n_aborted < PAPER_STEPS
+    assert n_paused + 3 <= n_aborted < CUT_STEPS
 
     held = _watched_to_the_end(client, run_a, watchers, outs, n_aborted)
     assert n_killed < len(_events(outs[1]))
@@ -399,17 +400,17 @@ def _stopped_cleanly(svc, run_id):
     assert data.exit_status == "aborted" and "service was stopped" in data.exit_message
     assert "ramped to 0 V" in data.exit_message
     n_stopped = data.n_steps
-    assert 5 <= n_stopped < PAPER_STEPS and record["n_done"] == n_stopped
+    assert 5 <= n_stopped < CUT_STEPS and record["n_done"] == n_stopped
     assert list(data.plan_index) == list(range(n_stopped))
     return data
 
 
 @pytest.mark.slow
 @pytest.mark.timeout(150)
-def test_stop_and_kill_mid_run_then_restart_reports_and_resumes(service_factory):
+def test_stop_and_kill_mid_run_then_restart_reports_and_resumes(service_factory, bench):
     svc = service_factory().start()
     client = svc.client()
-    run_id = client.submit("paper")
+    run_id = client.submit(bench / "paper_cut.toml")
     wait_for(lambda: client.run(run_id)["n_done"] >= 5, 60, "five steps")
 
     # a clean stop: the run is ended through the engine and recorded as interrupted
@@ -419,7 +420,7 @@ def test_stop_and_kill_mid_run_then_restart_reports_and_resumes(service_factory)
     # restart: the interrupted run is reported; resume continues it
     svc.start()
     wait_for(lambda: f"rig resume {run_id}" in svc.output(), 20, "the service's announcement")
-    assert f"{run_id} paper: {n_stopped}/{PAPER_STEPS} steps" in svc.output()
+    assert f"{run_id} paper_cut: {n_stopped}/{CUT_STEPS} steps" in svc.output()
     client = svc.client()
     status = client.status()
     assert status["interrupted"] == [run_id] and status["current"] is None
@@ -445,8 +446,8 @@ def test_stop_and_kill_mid_run_then_restart_reports_and_resumes(service_factory)
     record = client.wait(run_id, 90)
     assert record["state"] == "success" and record["attempts"] == 3, record
     done = read_measurement(record["path"])
-    assert done.complete and done.n_steps == PAPER_STEPS
-    assert sorted(done.plan_index) == list(range(PAPER_STEPS))
+    assert done.complete and done.n_steps == CUT_STEPS
+    assert sorted(done.plan_index) == list(range(CUT_STEPS))
     np.testing.assert_array_equal(done.frequency_hz[:n_stopped], data.frequency_hz)
     with client.events(run_id, follow=False) as stream:
         seqs = [e["seq"] for e in stream]
