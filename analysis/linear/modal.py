@@ -92,8 +92,16 @@ def mode_sensitivities(
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Exact derivatives of eigenvalues and mass-normalised mode shapes.
 
-    ``dlam = phi^T (dK - lam dM) phi`` and the shape derivative from the bordered system of
-    Nelson's method, its border scaled by ``s`` to the magnitude of ``K - lam M``::
+    ``dlam = phi^T (dK - lam dM) phi``. The shape derivative: when ``modes`` holds every mode
+    of ``(K, M)`` (as :func:`modal_analysis` returns them), by the expansion over all of
+    them, exact with a complete basis::
+
+        dphi_r = sum_{s != r} phi_s phi_s^T (dK - lam_r dM) phi_r / (lam_r - lam_s)
+                 - phi_r phi_r^T dM phi_r / 2
+
+    (three matrix products per parameter for all modes at once); otherwise from the
+    bordered system of Nelson's method (one solve of size ``n + 1`` per mode), its border
+    scaled by ``s`` to the magnitude of ``K - lam M``::
 
         [K - lam M   -s M phi] [dphi ]   [-(dK - lam dM) phi + dlam M phi]
         [-s phi^T M      0   ] [ c/s ] = [ s/2 phi^T dM phi             ]
@@ -104,6 +112,7 @@ def mode_sensitivities(
     ----------
     M, K : ndarray, shape (n, n)
     modes : Modes
+        The modes; all ``n`` of them for the expansion.
     dM, dK : dict name -> ndarray, shape (n, n)
         Derivatives of the matrices with respect to each parameter.
     which : ndarray of int, optional
@@ -119,8 +128,46 @@ def mode_sensitivities(
     -----
     Valid for distinct eigenvalues (repeated ones have no unique shape derivative).
     """
-    names = list(dK)
     which = np.arange(len(modes)) if which is None else np.asarray(which)
+    if modes.phi.shape[1] == M.shape[0]:
+        return _expanded(modes, dM, dK, which)
+    return _nelson(M, K, modes, dM, dK, which)
+
+
+def _expanded(
+    modes: Modes, dM: dict[str, np.ndarray], dK: dict[str, np.ndarray], which: np.ndarray
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """:func:`mode_sensitivities` by the expansion over every mode."""
+    phi = modes.phi
+    lam = modes.omega**2
+    lam_w = lam[which]
+    phi_w = phi[:, which]
+    cols = np.arange(which.size)
+    gap = lam_w[None, :] - lam[:, None]
+    gap[which, cols] = 1.0  # the mode itself: its coefficient is set below
+    dlam, dphi = {}, {}
+    for p, dKp in dK.items():
+        A = phi.T @ (dKp @ phi_w)  # phi_s^T dK phi_r
+        dMp = dM.get(p)
+        B = phi.T @ (dMp @ phi_w) if dMp is not None else np.zeros_like(A)
+        A -= B * lam_w[None, :]  # phi_s^T (dK - lam_r dM) phi_r
+        dlam[p] = A[which, cols].copy()
+        C = A / gap
+        C[which, cols] = -0.5 * B[which, cols]
+        dphi[p] = phi @ C
+    return dlam, dphi
+
+
+def _nelson(
+    M: np.ndarray,
+    K: np.ndarray,
+    modes: Modes,
+    dM: dict[str, np.ndarray],
+    dK: dict[str, np.ndarray],
+    which: np.ndarray,
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """:func:`mode_sensitivities` by Nelson's method, mode by mode."""
+    names = list(dK)
     n = M.shape[0]
     dlam = {p: np.empty(which.size) for p in names}
     dphi = {p: np.empty((n, which.size)) for p in names}

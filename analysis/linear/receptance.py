@@ -193,7 +193,9 @@ class ModalLinearModel:
 
     def _mode_sens(self) -> tuple[dict, dict]:
         if self._sens is None:
-            self._sens = mode_sensitivities(self.M, self.K, self.modes, self.dM, self.dK)
+            self._sens = mode_sensitivities(
+                self.M, self.K, self.all_modes, self.dM, self.dK, which=self.keep
+            )
         return self._sens
 
     def _high_flexibility(self) -> np.ndarray:

@@ -743,7 +743,12 @@ def _unidentified_modes(model: Model, asm, modes, names, pairs, band) -> list[di
     if not idx:
         return []
     dlam, _ = mode_sensitivities(
-        asm.M, asm.K, modes, {n: asm.dM[n] for n in names}, {n: asm.dK[n] for n in names}
+        asm.M,
+        asm.K,
+        modes,
+        {n: asm.dM[n] for n in names},
+        {n: asm.dK[n] for n in names},
+        which=np.array(idx),
     )
     lam = modes.omega**2
     return [
@@ -751,10 +756,10 @@ def _unidentified_modes(model: Model, asm, modes, names, pairs, band) -> list[di
             "model_mode": int(i) + 1,
             "frequency_hz": float(modes.frequency_hz[i]),
             "sensitivity": {
-                n: float(0.5 * dlam[n][i] / lam[i] * model.parameters[n].value) for n in names
+                n: float(0.5 * dlam[n][j] / lam[i] * model.parameters[n].value) for n in names
             },
         }
-        for i in idx
+        for j, i in enumerate(idx)
     ]
 
 

@@ -113,7 +113,7 @@ class EqualizedFRFObjective:
         names = self.space.names
         dM = {n: asm.dM[n] for n in names}
         dK = {n: asm.dK[n] for n in names}
-        dlam, dphi = mode_sensitivities(asm.M, asm.K, lin.modes, dM, dK)
+        dlam, dphi = mode_sensitivities(asm.M, asm.K, lin.all_modes, dM, dK, which=lin.keep)
         phi, M = lin.modes.phi, asm.M
         for n in names:
             dres = -Rr.T @ dK[n] @ Rc
