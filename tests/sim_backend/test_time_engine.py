@@ -40,8 +40,10 @@ def test_stepper_matches_a_direct_integration_through_contact() -> None:
         np.zeros(sp.size),
         method="Radau",
         t_eval=t[1:],
-        rtol=1e-7,
-        atol=1e-12,
+        # within 3e-5 of the largest of an integration at rtol 1e-7, atol 1e-12 (three times
+        # as long): 300 times inside the tolerance below
+        rtol=1e-5,
+        atol=1e-10,
         jac=sp.A,
     )
     assert ref.success
