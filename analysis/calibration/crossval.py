@@ -206,7 +206,14 @@ def _fold(spec: ObjectiveSpec, theta0: np.ndarray, bounds, max_iterations: int, 
         r, J, index = start
         r0, J0 = r[index], J[index]
     fun = _Started(obj, theta0, r0, J0)
-    res = least_squares_lm(fun, theta0, bounds=bounds, damped=False, max_iterations=max_iterations)
+    res = least_squares_lm(
+        fun,
+        theta0,
+        bounds=bounds,
+        damped=False,
+        max_iterations=max_iterations,
+        trial_cost=obj.bounded_cost,
+    )
     return res.x, len(res.history) - 1
 
 

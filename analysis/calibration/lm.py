@@ -72,6 +72,7 @@ def least_squares_lm(
     callback: Callable[[dict], None] | None = None,
     max_evaluations: int | None = None,
     stop: Callable[[Sequence[dict], np.ndarray], str | None] | None = None,
+    trial_cost: Callable[[np.ndarray, float], tuple[float, bool]] | None = None,
 ) -> LeastSquaresResult:
     """Bounded Levenberg-Marquardt (or undamped Gauss-Newton with ``damped=False``).
 
@@ -96,6 +97,13 @@ def least_squares_lm(
     stop : callable, optional
         ``stop(history, r)`` after each accepted iteration (``r`` the residuals there): a
         message to stop the fit there (not a success), or None to go on.
+    trial_cost : callable, optional
+        ``trial_cost(x, limit) -> (cost, exact)``: the cost of a trial step, which a trial
+        needs only to compare with the current cost ``limit``: it may stop once the cost
+        provably exceeds ``limit`` (``exact`` False: the trial fails, as it would with the
+        whole cost). Must equal ``fun``'s cost where exact (e.g.
+        :meth:`analysis.calibration.objective.FRFObjective.bounded_cost`); counted as one
+        evaluation. Default: ``fun`` without the Jacobian.
 
     A stopped fit's covariance is that of its last iterate, not of an optimum.
     """
@@ -117,7 +125,9 @@ def least_squares_lm(
         if left < 1:
             message, it = OUT_OF_EVALUATIONS, it - 1
             break
-        x_new, cost_new, lam, tries = _trial_step(fun, x, r, J, cost, lam, damped, lo, hi, left)
+        x_new, cost_new, lam, tries = _trial_step(
+            fun, x, r, J, cost, lam, damped, lo, hi, left, trial_cost
+        )
         nfev += tries
         if x_new is None:
             if tries < _TRIALS:
@@ -166,12 +176,25 @@ def _covariance(J: np.ndarray) -> np.ndarray:
 _TRIALS = 12
 
 
-def _trial_step(fun, x, r, J, cost, lam, damped, lo, hi, trials: int = _TRIALS):
+def _residual_cost(fun) -> Callable[[np.ndarray, float], tuple[float, bool]]:
+    """A trial's cost from ``fun``'s residuals: ``(cost, True)``, ``inf`` where infeasible."""
+
+    def cost_of(x: np.ndarray, limit: float) -> tuple[float, bool]:
+        r, _ = fun(x, False)
+        return (0.5 * float(r @ r) if np.all(np.isfinite(r)) else np.inf), True
+
+    return cost_of
+
+
+def _trial_step(fun, x, r, J, cost, lam, damped, lo, hi, trials: int = _TRIALS, trial_cost=None):
     """Up to ``trials`` trials of a step from ``x`` until one lowers the cost: the damping
     raised 5-fold after each failure (LM), or the Gauss-Newton step halved (undamped).
+    ``trial_cost(x, limit) -> (cost, exact)`` prices a trial (default: from ``fun``'s
+    residuals); it may stop once the cost is known to exceed ``limit`` (``exact`` False).
 
     Returns ``(x_new, cost_new, lam, evaluations)``; ``x_new`` None when no trial lowered it.
     """
+    trial_cost = trial_cost or _residual_cost(fun)
     A = J.T @ J
     g = J.T @ r
     d = np.diag(A).copy()
@@ -185,9 +208,8 @@ def _trial_step(fun, x, r, J, cost, lam, damped, lo, hi, trials: int = _TRIALS):
             except np.linalg.LinAlgError:
                 step = -np.linalg.lstsq(M, g, rcond=None)[0]
         x_new = np.clip(x + factor * step, lo, hi)
-        r_new, _ = fun(x_new, False)
-        cost_new = 0.5 * float(r_new @ r_new) if np.all(np.isfinite(r_new)) else np.inf
-        if cost_new < cost:
+        cost_new, exact = trial_cost(x_new, cost)
+        if exact and cost_new < cost:
             return x_new, cost_new, lam, tries
         if damped:
             lam = max(lam * 5.0, 1e-6)

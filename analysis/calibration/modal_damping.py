@@ -37,7 +37,7 @@ class DampedPredictor(BranchMatchedPredictor):
     :class:`~analysis.linear.receptance.ModalLinearModel`) through the balance's implicit
     differentiation, as every structural parameter's."""
 
-    def predict(self, values=None, params=(), rows=None, **kw):
+    def predict(self, values=None, params=(), rows=None, *, stop_at_failure=False, bound=None):
         values = dict(values or {})
         zetas = {n: values.pop(n) for n in list(values) if n.startswith(ZETA)}
         asked = {int(n[len(ZETA) :]) for n in params if n.startswith(ZETA)}
@@ -55,7 +55,9 @@ class DampedPredictor(BranchMatchedPredictor):
                 dataclasses.replace(base_model.damping, per_mode=per_mode)
             )
         try:
-            return super().predict(values, params, rows, **kw)
+            return super().predict(
+                values, params, rows, stop_at_failure=stop_at_failure, bound=bound
+            )
         finally:
             self.model = base_model
 

@@ -676,6 +676,7 @@ def _best_lm(objective, starts, bounds, st: CalibrationSettings, progress):
             bounds=bounds,
             max_iterations=st.max_iterations,
             callback=iterations("Levenberg-Marquardt", progress),
+            trial_cost=objective.bounded_cost,
         )
         if best is None or res.cost < best.cost:
             best = res

@@ -198,3 +198,33 @@ def test_stepping_one_step_at_a_time_is_solve_steps(run):
     for a, b in zip(ours, ref, strict=True):
         assert a.converged == b.converged
         assert np.array_equal(a.X, b.X)
+
+
+def test_a_failing_trial_step_is_stopped_and_the_fit_is_the_same(run):
+    """Levenberg-Marquardt's trial steps priced by ``bounded_cost`` (a trial only has to beat
+    the current cost): every iterate, cost and evaluation count the same bit for bit as with
+    every trial solved in full, and fewer steps solved, from a start whose first trials fail."""
+    from analysis.calibration.lm import least_squares_lm
+
+    model, data = run
+    space = ParameterSpace.from_model(model, SETTINGS.parameters)
+    start = space.to_theta([{**TRUTH, "k_c": 3 * TRUTH["k_c"]}[n] for n in space.names])
+    fits, solved = [], []
+    for bounded in (False, True):
+        obj = _paper_objective(model, data, space)
+        before = obj.predictor.steps_solved
+        fits.append(
+            least_squares_lm(
+                obj,
+                start,
+                bounds=space.theta_bounds(),
+                max_iterations=6,
+                trial_cost=obj.bounded_cost if bounded else None,
+            )
+        )
+        solved.append(obj.predictor.steps_solved - before)
+    full, bounded = fits
+    assert [h["x"] for h in bounded.history] == [h["x"] for h in full.history]
+    assert [h["cost"] for h in bounded.history] == [h["cost"] for h in full.history]
+    assert bounded.nfev == full.nfev > len(full.history)  # some trial failed
+    assert solved[1] < solved[0]
