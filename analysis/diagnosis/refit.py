@@ -236,7 +236,7 @@ def _lm_until(
         callback=iterations(LM_STAGE, progress),
         max_evaluations=limits.max_evaluations,
         stop=lambda seen, r: rule.check(seen, max(r.size - n, 1)),
-        trial_cost=obj.bounded_cost,
+        trial_cost=getattr(obj, "bounded_cost", None),
     )
     if res.message in STOPPED:
         res.cov = np.full((n, n), np.nan)
