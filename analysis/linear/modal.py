@@ -9,6 +9,9 @@ import scipy.linalg as sla
 
 __all__ = ["Modes", "modal_analysis", "mode_sensitivities"]
 
+#: ``(dlam, dphi)`` of :func:`mode_sensitivities`, by parameter name.
+Sensitivities = tuple[dict[str, np.ndarray], dict[str, np.ndarray]]
+
 
 @dataclass(frozen=True)
 class Modes:
@@ -89,7 +92,7 @@ def mode_sensitivities(
     dM: dict[str, np.ndarray],
     dK: dict[str, np.ndarray],
     which: np.ndarray | None = None,
-) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+) -> Sensitivities:
     """Exact derivatives of eigenvalues and mass-normalised mode shapes.
 
     ``dlam = phi^T (dK - lam dM) phi``. The shape derivative: when ``modes`` holds every mode
@@ -136,7 +139,7 @@ def mode_sensitivities(
 
 def _expanded(
     modes: Modes, dM: dict[str, np.ndarray], dK: dict[str, np.ndarray], which: np.ndarray
-) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+) -> Sensitivities:
     """:func:`mode_sensitivities` by the expansion over every mode."""
     phi = modes.phi
     lam = modes.omega**2
@@ -165,7 +168,7 @@ def _nelson(
     dM: dict[str, np.ndarray],
     dK: dict[str, np.ndarray],
     which: np.ndarray,
-) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+) -> Sensitivities:
     """:func:`mode_sensitivities` by Nelson's method, mode by mode."""
     names = list(dK)
     n = M.shape[0]
