@@ -1,11 +1,11 @@
-"""The main job, ``rig workflow``, end to end on the simulated rig (reduced plans)."""
+"""The main job, ``rig workflow``, end to end on the simulated rig: the shipped random test, the
+'quick' stepped-sine plan."""
 
 import json
 
 import pytest
 
 from rig.cli.workflow import run_workflow
-from rig.config.plans import builtin_plans
 
 TRUTH_GAP_M = 0.60e-3  # the reference truth's gap
 TRUTH_KC = 4.51e5
@@ -18,15 +18,9 @@ pytestmark = pytest.mark.slow
 @pytest.fixture(scope="module")
 def workflow(tmp_path_factory):
     d = tmp_path_factory.mktemp("workflow")
-    # the random test with fewer averages (40 of 64), the 'quick' stepped-sine plan (2 and 8 N)
-    text = builtin_plans()["linear"].read_text()
-    assert "average_records = 64" in text
-    plan = d / "random.toml"
-    plan.write_text(text.replace("average_records = 64", "average_records = 40"))
+    # the shipped random test, the 'quick' stepped-sine plan (2 and 8 N)
     out = d / "out"
-    summary = run_workflow(
-        out, plan="quick", linear_plan=str(plan), starts=6, quiet=True, lock_dir=d / "locks"
-    )
+    summary = run_workflow(out, plan="quick", starts=6, quiet=True, lock_dir=d / "locks")
     return out, summary
 
 
