@@ -14,8 +14,10 @@ small cache of assemblies keyed by the linear parameter values.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
+import pickle
 import re
 import tomllib
 import warnings
@@ -164,6 +166,15 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     return a
 
 
+@functools.lru_cache(maxsize=8)
+def _structure_of(frame: bytes) -> LinearStructure:
+    """The structure of a pickled frame. A stepped-sine predictor or a linear calibration adds
+    its file's sensor masses to the model it is given (a new frame) each time it is made, and
+    a diagnosis makes hundreds of them from a few models: equal frames pickle to equal bytes
+    and share one structure (its forms are read-only)."""
+    return build_structure(pickle.loads(frame))  # noqa: S301 -- bytes pickled in this process
+
+
 class _Shared:
     """Structure and assemblies shared by models that differ only in values or elements."""
 
@@ -289,10 +300,11 @@ class Model:
         if self.frame is not None:
             self._check_coefficients()
         index, node_xy = self._dof_map()
+        nodes = {n for n, _ in index}
         object.__setattr__(
             self,
             "points",
-            {n: self._point(p, index, node_xy) for n, p in sorted(self.points.items())},
+            {n: self._point(p, index, nodes, node_xy) for n, p in sorted(self.points.items())},
         )
         names = [s.name for s in self.nonlinear]
         if dup := {n for n in names if names.count(n) > 1}:
@@ -325,7 +337,7 @@ class Model:
     def _dof_map(self) -> tuple[Mapping, Mapping]:
         if self.frame is not None:
             if self._shared.structure is None:
-                self._shared.structure = build_structure(self.frame)
+                self._shared.structure = _structure_of(pickle.dumps(self.frame))
             return self._shared.structure.index, self._shared.structure.node_xy
         if self._shared.part is None:
             self._shared.part = _load_part(self.linear_part)
@@ -337,7 +349,9 @@ class Model:
                 raise SpecError(("linear_part", "masses", node), f"must be >= 0, got {m!r}")
         return {d: i for i, d in enumerate(part.dofs)}, part.node_xy
 
-    def _point(self, p: MeasurementPoint, index: Mapping, node_xy: Mapping) -> MeasurementPoint:
+    def _point(
+        self, p: MeasurementPoint, index: Mapping, nodes: set, node_xy: Mapping
+    ) -> MeasurementPoint:
         path = ("points", str(p.number))  # a table key in the file
         node = p.node
         if not node:
@@ -347,7 +361,7 @@ class Model:
             if len(hits) > 1:
                 raise SpecError((*path, "xy"), f"coincident nodes {hits} here; name the node")
             node = hits[0]
-        elif not any(n == node for n, _ in index) and node not in node_xy:
+        elif node not in nodes and node not in node_xy:
             raise SpecError((*path, "node"), f"unknown node {node!r}")
         xy = node_xy.get(node)
         if p.xy is not None and xy is not None and math.dist(xy, p.xy) > 1e-6:

@@ -386,6 +386,8 @@ class SteppedSinePredictor:
         F = self._force_sign * self.drive_force[sweep]
         X = None
         H = len(self.orders)
+        if params:
+            pb.prefetch(2 * np.pi * d.frequency_hz[sweep[need[sweep]]], params)
         for j, row in enumerate(sweep):
             wk = 2 * np.pi * d.frequency_hz[row] * orders  # (H,)
             factor = sign * (1j * wk[None, :]) ** power / F[j][None, :H] * self._force_sign

@@ -513,6 +513,8 @@ class BranchMatchedPredictor(SteppedSinePredictor):
         C = len(self.channel_indices)
         out = Prediction.empty((d.n_steps, C, len(self.compared)), params)
         need = needed_rows(d.n_steps, rows)
+        if params:
+            pb.prefetch([p.omega for r, p in points.items() if need[r] and p.converged], params)
         for row, p in points.items():
             if not out.mark(row, p, d.frequency_hz[row]):
                 continue

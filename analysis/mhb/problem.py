@@ -18,6 +18,7 @@ Proc. IMAC XV, 1997. T. Abrahamsson et al. / Y. Chen et al. (the reference paper
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
 
@@ -62,22 +63,27 @@ def real_operator(Hc: np.ndarray) -> np.ndarray:
     return G.reshape((2 * H + 1) * r, (2 * H + 1) * c)
 
 
-class _Receptances(dict):
+class _Receptances(dict[str | tuple[str, str, str], np.ndarray]):
     """One frequency's receptance blocks, each computed when first asked for (a continuation
     step needs ``G`` and ``nf`` at every trial frequency, the outputs' blocks only at the
-    points it keeps)."""
+    points it keeps); ``("d", block, parameter)`` is a block's derivative with respect to a
+    parameter of the linear structure."""
 
     def __init__(self, blocks: dict, w: np.ndarray) -> None:
         w.setflags(write=False)
-        super().__init__(w=w)
+        super().__init__()
+        self["w"] = w
         self._blocks = blocks
 
-    def __missing__(self, name: str) -> np.ndarray:
+    def __missing__(self, name: str | tuple[str, str, str]) -> np.ndarray:
         w = self["w"]
         if name == "G":
-            Hnn = self._blocks["nn"](w)
+            Hnn = np.array(self["nn"])
             Hnn[0] = Hnn[0].real
             value = real_operator(Hnn)
+        elif isinstance(name, tuple):
+            _, block, param = name
+            value = self._blocks[block].derivative(w, param)
         else:
             value = self._blocks[name](w)
         value.setflags(write=False)
@@ -171,7 +177,7 @@ class HarmonicProblem:
             "on": self.linear.block(self.output_dofs, nl) if n else None,
             "of": self.linear.block(self.output_dofs, self.force_dofs),
         }
-        self._receptances: OrderedDict[float, dict] = OrderedDict()
+        self._receptances: OrderedDict[float, _Receptances] = OrderedDict()
         b = self.basis
         self.kernel_basis = (b.EdE, b.tau, b.k, b.P, b.E, b.dE, b.jump_weights)
         self._element_arrays: kernels.ElementArrays | None | str = "not made"
@@ -185,7 +191,7 @@ class HarmonicProblem:
         """Angular frequencies of harmonics ``0..H`` of the base, shape (H+1,), rad/s."""
         return np.arange(self.n_harmonics + 1) * (omega / self.denominator)
 
-    def receptances(self, omega: float) -> dict[str, np.ndarray]:
+    def receptances(self, omega: float) -> _Receptances:
         """The receptance blocks at the harmonics of ``omega`` (read-only arrays, each computed
         when first asked for): ``w`` the harmonics' angular frequencies, ``nf``, ``on``, ``of``
         the blocks (H+1, rows, cols), ``G`` the real operator of ``nn`` (harmonic 0 real) on
@@ -205,6 +211,33 @@ class HarmonicProblem:
         if len(self._receptances) > LINEAR_CACHE_SIZE:
             self._receptances.popitem(last=False)
         return out
+
+    def prefetch(self, omegas: np.ndarray, params: Sequence[str] = ()) -> None:
+        """Make :meth:`receptances` hold the blocks at the harmonics of every frequency in
+        ``omegas`` [rad/s], and their derivatives with respect to those of ``params`` that are
+        the linear structure's, each evaluated once over all the frequencies: a new model's
+        sweep needs them at each of its steps, and one evaluation over a sweep's harmonics
+        costs little more than one over a step's (the same values: a block's entries at a
+        frequency do not depend on the others asked for)."""
+        lin = set(getattr(self.linear, "param_names", ()))
+        names: list[tuple[str, str | None]] = [
+            (name, None) for name, block in self.blocks.items() if block is not None
+        ]
+        names += [(name, p) for name, _ in names for p in dict.fromkeys(params) if p in lin]
+        freqs = list(dict.fromkeys(float(w) for w in np.atleast_1d(omegas)))
+        recs = [self.receptances(w) for w in freqs[-LINEAR_CACHE_SIZE:]]
+        for name, param in names:
+            key = name if param is None else ("d", name, param)
+            todo = [r for r in recs if key not in r]
+            if not todo:
+                continue
+            block = self.blocks[name]
+            W = np.concatenate([r["w"] for r in todo])
+            v = block(W) if param is None else block.derivative(W, param)
+            v = v.reshape(len(todo), self.n_harmonics + 1, *v.shape[1:])
+            v.setflags(write=False)
+            for i, r in enumerate(todo):
+                r[key] = v[i]
 
     def element_arrays(self) -> kernels.ElementArrays | None:
         """The elements as the compiled kernels take them (:mod:`analysis.mhb.kernels`), or

@@ -84,7 +84,7 @@ def point_sensitivities(
     b = problem.basis
     n = problem.n_nl
     prep = point.lin["prep"]
-    w, Fk = prep["w"], prep["Fk"]
+    rec, Fk = prep["rec"], prep["Fk"]  # the blocks' derivatives too: see HarmonicProblem.prefetch
     lin_names = set(getattr(problem.linear, "param_names", ()))
     out: dict[str, PointSensitivity] = {}
     if n:
@@ -92,31 +92,33 @@ def point_sensitivities(
         J = np.eye(b.size * n) - G @ dFdX
         dF_el = parameter_forces(problem, point.X, prep["omega_b"])
         Hon = prep["rec"]["on"]
-    for p in names:
-        dq = np.zeros_like(point.q_out)
-        if n:
-            rhs = np.zeros(b.size * n)
+        # every parameter's right-hand side first: one factorisation of J for all of them
+        rhs = np.zeros((b.size * n, len(names)))
+        for i, p in enumerate(names):
             dFp = dF_el.get(p)
             if dFp is not None:
-                rhs += G @ dFp.ravel()
+                rhs[:, i] += G @ dFp.ravel()
             if p in lin_names:
-                dHnn = problem.blocks["nn"].derivative(w, p)
+                dHnn = np.array(rec["d", "nn", p])
                 dHnn[0] = dHnn[0].real
-                rhs += real_operator(dHnn) @ F.ravel()
-                dHnf = problem.blocks["nf"].derivative(w, p)
-                rhs += b.from_complex(np.einsum("kij,kj->ki", dHnf, Fk)).ravel()
-            dX = np.linalg.solve(J, rhs).reshape(b.size, n)
+                rhs[:, i] += real_operator(dHnn) @ F.ravel()
+                dHnf = rec["d", "nf", p]
+                rhs[:, i] += b.from_complex(np.einsum("kij,kj->ki", dHnf, Fk)).ravel()
+        dX_all = np.linalg.solve(J, rhs).T.copy() if names else rhs.T
+    for i, p in enumerate(names):
+        dq = np.zeros_like(point.q_out)
+        if n:
+            dX = dX_all[i].reshape(b.size, n)
+            dFp = dF_el.get(p)
             dFtot = (dFdX @ dX.ravel()).reshape(b.size, n)
             if dFp is not None:
                 dFtot = dFtot + dFp
             dq += np.einsum("kij,kj->ki", Hon, b.to_complex(dFtot))
             if p in lin_names:
-                dq += np.einsum(
-                    "kij,kj->ki", problem.blocks["on"].derivative(w, p), b.to_complex(F)
-                )
+                dq += np.einsum("kij,kj->ki", rec["d", "on", p], b.to_complex(F))
         else:
             dX = np.zeros((b.size, 0))
         if p in lin_names:
-            dq += np.einsum("kij,kj->ki", problem.blocks["of"].derivative(w, p), Fk)
+            dq += np.einsum("kij,kj->ki", rec["d", "of", p], Fk)
         out[p] = PointSensitivity(dX=dX, dq_out=dq)
     return out

@@ -137,6 +137,7 @@ def solve_steps(
             f"force: expected shape (n_steps={omega.size}, n_orders={n_o}, n_f={n_f}), "
             f"got {force.shape}"
         )
+    problem.prefetch(omega)
     points: list[MHBPoint] = []
     last: MHBPoint | None = None
     last_force = None

@@ -47,6 +47,24 @@ def test_the_rig_frame_reads_to_the_values_its_file_gives():
     )
 
 
+def test_models_with_equal_frames_share_one_structure_and_assemble_as_a_new_one():
+    """Predictors and calibrations add their file's sensor masses to the model each time they
+    are made (a new frame): equal frames share one structure, another mass gets its own, and
+    the matrices are those of a structure built afresh."""
+    from analysis.fe import build_structure
+
+    model = load_model(RIG)
+    a, b = model.add_masses({3: 0.012}), load_model(RIG).add_masses({3: 0.012})
+    c = model.add_masses({3: 0.020})
+    assert a.structure is b.structure and a.structure is not c.structure
+    for m in (a, c):
+        fresh = build_structure(m.frame)
+        for which in ("M", "K"):
+            assert (m.structure.matrix(which, m.values()) == fresh.matrix(which, m.values())).all()
+    dm = c.structure.matrix("M", c.values()) - a.structure.matrix("M", a.values())
+    assert dm.sum() == pytest.approx(2 * 0.008, rel=1e-12)  # x and y of point 3
+
+
 def test_the_cantilever_frame_reads_to_the_values_its_file_gives():
     frame = load_model(CANTILEVER).frame
     assert frame.nodes == {"root": (0.0, 0.0), "tip": (0.5, 0.0)}

@@ -134,6 +134,60 @@ def test_sensitivities_match_finite_differences(system):
         assert np.abs(an - fd).max() <= 2e-4 * np.abs(fd).max(), name
 
 
+@pytest.mark.parametrize("linear", ["direct", "modal with a static support"])
+def test_prefetched_receptances_and_derivatives_equal_those_of_each_frequency(linear):
+    """:meth:`HarmonicProblem.prefetch` evaluates the blocks and their parameter derivatives
+    over many frequencies at once: each frequency's values are those one evaluation at that
+    frequency gives (to 1e-14 of the largest, einsum's summation may pair terms otherwise),
+    and the solutions and sensitivities of a sweep are the same with and without it."""
+    from analysis.linear.receptance import ModalLinearModel
+    from analysis.linear.static_support import StaticSupport
+    from analysis.mhb.sensitivity import point_sensitivities
+
+    def problem():
+        pb = contact_chain(n_harmonics=6, n_time=128)
+        if linear == "direct":
+            return pb
+        lin = pb.linear
+        modal = ModalLinearModel(lin.M, lin.K, zeta=0.02, dM={}, dK=lin.dK, f_max_hz=1e3)
+        return HarmonicProblem(
+            StaticSupport(modal, 0, 1e4),
+            pb.attachments,
+            pb.force_dofs,
+            pb.output_dofs,
+            pb.orders,
+            pb.n_harmonics,
+            pb.n_time,
+        )
+
+    omega = 2 * np.pi * np.linspace(20.0, 30.0, 12)
+    F = np.array([40.0, 0.8, 0.8])
+    params = ["k_c", "k1", "k2"]
+    batched, single = problem(), problem()
+    batched.prefetch(omega, params)
+    blocks = ("nn", "nf", "on", "of")
+    keys = [*blocks, *(("d", n, p) for n in blocks for p in ("k1", "k2"))]
+    for w in omega:
+        a, b = batched.receptances(w), single.receptances(w)
+        for key in keys:
+            assert key in dict(a), key
+            assert np.abs(a[key] - b[key]).max() <= 1e-14 * np.abs(b[key]).max(), key
+        assert ("d", "nn", "k_c") not in dict(a)  # an element's parameter has no block derivative
+    sweep_a = solve_steps(batched, omega, F)
+    sweep_b = solve_steps(single, omega, F)
+    assert sweep_b.converged.sum() >= 8
+    for pa, pb_ in zip(sweep_a.points, sweep_b.points, strict=True):
+        assert pa.converged == pb_.converged
+        assert np.abs(pa.q_out - pb_.q_out).max() <= 1e-12 * np.abs(pb_.q_out).max()
+        if not pb_.converged:
+            continue
+        sa, sb = point_sensitivities(batched, pa, params), point_sensitivities(single, pb_, params)
+        for name in params:
+            ref = sb[name].d_outputs(single.order_k)
+            got = sa[name].d_outputs(batched.order_k)
+            assert np.abs(got - ref).max() <= 1e-12 * np.abs(ref).max(), name
+
+
 def test_a_frequencys_receptances_are_computed_once_and_the_solution_is_unchanged():
     """A stepped test solves every level at the same frequencies: no block is evaluated twice
     at a frequency over two levels, and the second level's solution is the one a fresh
@@ -146,8 +200,8 @@ def test_a_frequencys_receptances_are_computed_once_and_the_solution_is_unchange
     seen = {name: [] for name in pb.blocks}
 
     def counted(name, block):
-        def call(w):
-            seen[name].append(float(w[1]))
+        def call(w):  # the harmonics of one or more base frequencies
+            seen[name] += [float(x) for x in w.reshape(-1, pb.n_harmonics + 1)[:, 1]]
             return block(w)
 
         return call
