@@ -153,6 +153,10 @@ class ModalLinearModel:
     damping_modes : sequence of int, optional
         Modes (1-based) whose damping ratios are parameters too, named :func:`zeta_name`
         (``zeta_4``), with exact derivatives.
+    modes : Modes, optional
+        Every mode of ``(K, M)`` with its damping ratio, when the caller has them already
+        (``zeta`` and ``default_zeta`` are then not used): a fit evaluates its accepted
+        iterate once more for the Jacobian.
     """
 
     def __init__(
@@ -166,11 +170,16 @@ class ModalLinearModel:
         dM: dict[str, np.ndarray] | None = None,
         dK: dict[str, np.ndarray] | None = None,
         damping_modes: Sequence[int] = (),
+        modes: Modes | None = None,
     ) -> None:
         self.M = np.asarray(M, dtype=float)
         self.K = np.asarray(K, dtype=float)
         self.n_dof = self.M.shape[0]
-        self.all_modes = modal_analysis(self.M, self.K, zeta, default_zeta=default_zeta)
+        self.all_modes = (
+            modal_analysis(self.M, self.K, zeta, default_zeta=default_zeta)
+            if modes is None
+            else modes
+        )
         if self.all_modes.omega[0] <= 0:
             raise ValueError(
                 "the structure has a rigid-body mode: residual flexibility needs supports"
@@ -189,7 +198,8 @@ class ModalLinearModel:
         self.zeta = {zeta_name(m): retained.get(int(m)) for m in damping_modes}
         self.param_names = tuple(self.dK) + tuple(self.zeta)
         self._sens: tuple[dict, dict] | None = None
-        self._R_high: np.ndarray | None = None
+        self._high: tuple[np.ndarray, np.ndarray] | None = None
+        self._terms: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 
     def _mode_sens(self) -> tuple[dict, dict]:
         if self._sens is None:
@@ -198,45 +208,56 @@ class ModalLinearModel:
             )
         return self._sens
 
-    def _high_flexibility(self) -> np.ndarray:
-        """Static flexibility of the truncated modes, ``sum_h phi phi^T / omega^2``, (n, n).
+    def high_flexibility(self, dofs: list[int]) -> np.ndarray:
+        """Rows ``dofs`` of the static flexibility of the truncated modes, ``sum_h phi
+        phi^T / omega^2``, shape (len(dofs), n) (symmetric: its columns are these rows
+        transposed).
 
         Summed mode by mode: ``K^-1 - sum_retained phi phi^T / omega^2`` is the same in exact
         arithmetic, but on soft supports ``K^-1`` is dominated by the retained suspension modes
         and the difference keeps their round-off.
         """
-        if self._R_high is None:
+        if self._high is None:
             high = np.setdiff1d(np.arange(len(self.all_modes)), self.keep)
             ph = self.all_modes.phi[:, high]
-            self._R_high = (ph / self.all_modes.omega[high] ** 2) @ ph.T
-        return self._R_high
+            self._high = (ph / self.all_modes.omega[high] ** 2, ph)
+        scaled, ph = self._high
+        return scaled[dofs] @ ph.T
+
+    def _shape_terms(self, p: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(dX^T M + X^T dM, M dX + dM X)`` of parameter ``p`` (``X`` the retained shapes),
+        shared by every block's residual derivative."""
+        if p not in self._terms:
+            dX = self._mode_sens()[1][p]
+            phi, M, dM = self.modes.phi, self.M, self.dM.get(p)
+            A = dX.T @ M + (phi.T @ dM if dM is not None else 0.0)
+            B = M @ dX + (dM @ phi if dM is not None else 0.0)
+            self._terms[p] = (A, B)
+        return self._terms[p]
 
     def block(self, rows: list[int], cols: list[int]) -> _ModalBlock:
         """Receptance block between DOF index lists ``rows`` and ``cols``."""
         rows, cols = list(rows), list(cols)
         phi = self.modes.phi
-        R = self._high_flexibility()
+        Rr = self.high_flexibility(rows)  # (rows, n)
+        Rc = self.high_flexibility(cols).T  # (n, cols)
         blk = _ModalBlock(
             phi[rows],
             phi[cols],
             self.modes.omega,
             self.modes.zeta,
-            R[np.ix_(rows, cols)].copy(),
+            Rr[:, cols].copy(),
             zeta=dict(self.zeta),
         )
         if self.dK:
             dlam, dphi = self._mode_sens()
-            M = self.M
             for p in self.dK:
-                dK = self.dK[p]
-                dM = self.dM.get(p)
                 dX = dphi[p]
+                A, B = self._shape_terms(p)
                 # dR_h = -R dK R - X (dX^T M + X^T dM) R - R (M dX + dM X) X^T: no cancellation
-                A = dX.T @ M + (phi.T @ dM if dM is not None else 0.0)
-                B = M @ dX + (dM @ phi if dM is not None else 0.0)
-                dres = -(R[rows] @ dK @ R[:, cols])
-                dres -= phi[rows] @ (A @ R[:, cols])
-                dres -= (R[rows] @ B) @ phi[cols].T
+                dres = -(Rr @ self.dK[p] @ Rc)
+                dres -= phi[rows] @ (A @ Rc)
+                dres -= (Rr @ B) @ phi[cols].T
                 blk.sens[p] = (dX[rows], dX[cols], dlam[p], dres)
         return blk
 

@@ -27,11 +27,12 @@ large flexibility of the mount modes.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 from analysis.calibration.parameters import ParameterSpace
-from analysis.linear.modal import mode_sensitivities
+from analysis.linear.modal import Modes
 from analysis.linear.receptance import ModalLinearModel
 from analysis.model import Model
 
@@ -91,6 +92,7 @@ class EqualizedFRFObjective:
         self.use_phase = bool(use_phase)
         self._log_target = np.log10(np.abs(self.target))
         self.nfev = 0
+        self._last: tuple[bytes, Any, Modes] | None = None
 
     @property
     def n_residuals(self) -> int:
@@ -98,28 +100,25 @@ class EqualizedFRFObjective:
 
     def frf(self, theta: np.ndarray, want_jac: bool = False):
         """Model receptances ``(nk, C)`` and, optionally, ``dH/dtheta`` ``(nk, C, n)``."""
-        p = self.space.to_physical(theta)
-        asm = self.model.with_values(self.space.as_dict(p)).assemble()
-        lin = ModalLinearModel(asm.M, asm.K, self.zeta0, f_max_hz=self.f_max_hz)
+        key = theta.tobytes()
+        if self._last is not None and self._last[0] == key:
+            # the accepted trial of a fit, evaluated again for its Jacobian: its eigensolution
+            _, asm, modes = self._last
+        else:
+            p = self.space.to_physical(theta)
+            asm, modes = self.model.with_values(self.space.as_dict(p)).assemble(), None
+        names = self.space.names
+        dM = {n: asm.dM[n] for n in names} if want_jac else None
+        dK = {n: asm.dK[n] for n in names} if want_jac else None
+        lin = ModalLinearModel(
+            asm.M, asm.K, self.zeta0, f_max_hz=self.f_max_hz, dM=dM, dK=dK, modes=modes
+        )
+        self._last = (key, asm, lin.all_modes)
+        # its residual is the truncated modes' static flexibility, with exact derivatives
         blk = lin.block(self.rows, [self.col])
-        idx = sorted(set(self.rows) | {self.col})
-        R = _high_mode_flexibility(lin, idx)  # (n, len(idx))
-        Rr = R[:, [idx.index(i) for i in self.rows]]
-        Rc = R[:, [idx.index(self.col)]]
-        blk.residual = Rr[[self.col]].T
         H = blk(self.omega)[:, :, 0]
         if not want_jac:
             return H, None
-        names = self.space.names
-        dM = {n: asm.dM[n] for n in names}
-        dK = {n: asm.dK[n] for n in names}
-        dlam, dphi = mode_sensitivities(asm.M, asm.K, lin.all_modes, dM, dK, which=lin.keep)
-        phi, M = lin.modes.phi, asm.M
-        for n in names:
-            dres = -Rr.T @ dK[n] @ Rc
-            dres -= phi[self.rows] @ ((dphi[n].T @ M + phi.T @ dM[n]) @ Rc)
-            dres -= (Rr.T @ (M @ dphi[n] + dM[n] @ phi)) @ phi[[self.col]].T
-            blk.sens[n] = (dphi[n][self.rows], dphi[n][[self.col]], dlam[n], dres)
         dp = self.space.dp_dtheta(theta)
         dH = np.stack(
             [blk.derivative(self.omega, n)[:, :, 0] * dp[j] for j, n in enumerate(names)],
@@ -148,20 +147,6 @@ class EqualizedFRFObjective:
         return self(theta, want_jac=False)[0]
 
 
-def _high_mode_flexibility(lin: ModalLinearModel, cols: list[int]) -> np.ndarray:
-    """Static flexibility of the modes not superposed, columns ``cols``, shape (n, nc).
-
-    ``R_h = sum_(r not retained) phi_r phi_r^T / omega_r^2``, summed mode by mode. It equals
-    ``K^-1 - sum_retained phi phi^T / omega^2`` but without its cancellation: on soft mounts
-    ``K^-1`` is dominated by the mount modes, and the difference keeps round-off of that size,
-    which makes weakly responding channels jitter between nearby parameter values.
-    """
-    modes = lin.all_modes
-    high = np.setdiff1d(np.arange(len(modes)), lin.keep)
-    phi = modes.phi[:, high]
-    return (phi / modes.omega[high] ** 2) @ phi[cols].T
-
-
 def receptance(
     model: Model,
     rows: Sequence[int],
@@ -184,5 +169,4 @@ def receptance(
         asm.M, asm.K, zeta, default_zeta=model.damping.default_zeta, f_max_hz=f_max_hz
     )
     blk = lin.block(list(rows), [col])
-    blk.residual = _high_mode_flexibility(lin, [col])[list(rows)]
     return blk(2 * np.pi * np.asarray(frequency_hz, dtype=float))[:, :, 0]

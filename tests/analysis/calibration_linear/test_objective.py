@@ -72,3 +72,26 @@ def test_model_target_recovered_from_nominal() -> None:
     expected = np.array([TRUE_VALUES[n] for n in space.names])
     np.testing.assert_allclose(p, expected, rtol=1e-5)
     assert sol.cost < 1e-8  # round-off of the eigen-solution
+
+
+def test_a_point_evaluated_again_for_its_jacobian_reuses_its_eigensolution(monkeypatch) -> None:
+    """A fit evaluates its accepted trial once more with the Jacobian: the eigensolution is
+    taken from the evaluation before (one decomposition, not two), and the residuals and
+    Jacobian are those of a fresh objective bit for bit; another point decomposes again."""
+    import analysis.linear.receptance as receptance
+
+    calls = []
+    real = receptance.modal_analysis
+    monkeypatch.setattr(
+        receptance, "modal_analysis", lambda *a, **k: calls.append(1) or real(*a, **k)
+    )
+    obj, fresh = _objective(), _objective()
+    calls.clear()
+    x = obj.space.to_theta(np.array([TRUE_VALUES[n] for n in obj.space.names])) + 0.01
+    obj(x, False)
+    r, J = obj(x, True)
+    assert len(calls) == 1
+    r0, J0 = fresh(x, True)
+    assert np.array_equal(r, r0) and np.array_equal(J, J0)
+    obj(x + 0.01, False)
+    assert len(calls) == 3
