@@ -93,6 +93,19 @@ def test_mean_response_is_resolved_for_a_one_sided_stop():
     assert p.q_out[0, 1].real > 0
 
 
+def _with_linear(pb: HarmonicProblem, linear) -> HarmonicProblem:
+    """``pb`` with another linear structure (the same elements, DOFs, orders and balance)."""
+    return HarmonicProblem(
+        linear,
+        pb.attachments,
+        pb.force_dofs,
+        pb.output_dofs,
+        pb.orders,
+        pb.n_harmonics,
+        pb.n_time,
+    )
+
+
 @pytest.mark.parametrize("system", ["duffing", "contact"])
 def test_sensitivities_match_finite_differences(system):
     if system == "duffing":
@@ -118,14 +131,9 @@ def test_sensitivities_match_finite_differences(system):
                 el = att.element.with_params(**{att.param_map[name]: values[name] + s})
                 q = pb.with_elements([el])
             else:
-                q = HarmonicProblem(
+                q = _with_linear(
+                    pb,
                     DirectLinearModel(lin.M, lin.C + s * lin.dC[name], lin.K + s * lin.dK[name]),
-                    pb.attachments,
-                    pb.force_dofs,
-                    pb.output_dofs,
-                    pb.orders,
-                    pb.n_harmonics,
-                    pb.n_time,
                 )
             return solve_point(q, w, F, p.X).outputs()
 
@@ -150,15 +158,7 @@ def test_prefetched_receptances_and_derivatives_equal_those_of_each_frequency(li
             return pb
         lin = pb.linear
         modal = ModalLinearModel(lin.M, lin.K, zeta=0.02, dM={}, dK=lin.dK, f_max_hz=1e3)
-        return HarmonicProblem(
-            StaticSupport(modal, 0, 1e4),
-            pb.attachments,
-            pb.force_dofs,
-            pb.output_dofs,
-            pb.orders,
-            pb.n_harmonics,
-            pb.n_time,
-        )
+        return _with_linear(pb, StaticSupport(modal, 0, 1e4))
 
     omega = 2 * np.pi * np.linspace(20.0, 30.0, 12)
     F = np.array([40.0, 0.8, 0.8])
