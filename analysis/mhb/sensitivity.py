@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from analysis.mhb.aft import parameter_forces
-from analysis.mhb.problem import HarmonicProblem, real_operator
+from analysis.mhb.problem import HarmonicProblem
 from analysis.mhb.solver import MHBPoint
 
 __all__ = ["PointSensitivity", "parameter_names", "point_sensitivities"]
@@ -86,39 +86,39 @@ def point_sensitivities(
     prep = point.lin["prep"]
     rec, Fk = prep["rec"], prep["Fk"]  # the blocks' derivatives too: see HarmonicProblem.prefetch
     lin_names = set(getattr(problem.linear, "param_names", ()))
-    out: dict[str, PointSensitivity] = {}
-    if n:
+    # every parameter at once: the linear ones' block derivatives stacked (L, H+1, r, c)
+    il = [i for i, p in enumerate(names) if p in lin_names]
+    lp = [names[i] for i in il]
+
+    def stacked(block: str) -> np.ndarray:
+        return np.stack([rec["d", block, p] for p in lp])
+
+    dq = np.zeros((len(names), *point.q_out.shape), complex)
+    dX_all = np.zeros((len(names), b.size, n))
+    if n and names:
         G, dFdX, F = prep["G"], point.lin["dF"], point.lin["F"]
-        J = np.eye(b.size * n) - G @ dFdX
+        Fc = b.to_complex(F)
         dF_el = parameter_forces(problem, point.X, prep["omega_b"])
-        Hon = prep["rec"]["on"]
-        # every parameter's right-hand side first: one factorisation of J for all of them
-        rhs = np.zeros((b.size * n, len(names)))
+        dF_p = np.zeros((len(names), b.size, n))
         for i, p in enumerate(names):
-            dFp = dF_el.get(p)
-            if dFp is not None:
-                rhs[:, i] += G @ dFp.ravel()
-            if p in lin_names:
-                dHnn = np.array(rec["d", "nn", p])
-                dHnn[0] = dHnn[0].real
-                rhs[:, i] += real_operator(dHnn) @ F.ravel()
-                dHnf = rec["d", "nf", p]
-                rhs[:, i] += b.from_complex(np.einsum("kij,kj->ki", dHnf, Fk)).ravel()
-        dX_all = np.linalg.solve(J, rhs).T.copy() if names else rhs.T
-    for i, p in enumerate(names):
-        dq = np.zeros_like(point.q_out)
-        if n:
-            dX = dX_all[i].reshape(b.size, n)
-            dFp = dF_el.get(p)
-            dFtot = (dFdX @ dX.ravel()).reshape(b.size, n)
-            if dFp is not None:
-                dFtot = dFtot + dFp
-            dq += np.einsum("kij,kj->ki", Hon, b.to_complex(dFtot))
-            if p in lin_names:
-                dq += np.einsum("kij,kj->ki", rec["d", "on", p], b.to_complex(F))
-        else:
-            dX = np.zeros((b.size, 0))
-        if p in lin_names:
-            dq += np.einsum("kij,kj->ki", rec["d", "of", p], Fk)
-        out[p] = PointSensitivity(dX=dX, dq_out=dq)
-    return out
+            if p in dF_el:
+                dF_p[i] = dF_el[p]
+        # dX = J^-1 (G dF_p + dG F + dX_lin): one factorisation of J for every parameter
+        rhs = (G @ dF_p.reshape(len(names), -1).T).T.reshape(dF_p.shape)
+        if lp:
+            dnn = np.array(stacked("nn"))
+            dnn[:, 0] = dnn[:, 0].real
+            lin = np.einsum("lkij,kj->kli", dnn, Fc) + np.einsum("lkij,kj->kli", stacked("nf"), Fk)
+            rhs[il] += b.from_complex(lin).transpose(1, 0, 2)  # as real_operator(dnn) @ F
+        J = np.eye(b.size * n) - G @ dFdX
+        dX_all = np.linalg.solve(J, rhs.reshape(len(names), -1).T).T.reshape(dF_p.shape)
+        dF_tot = (dFdX @ dX_all.reshape(len(names), -1).T).T.reshape(dF_p.shape) + dF_p
+        dq += np.einsum("kij,kpj->pki", prep["rec"]["on"], b.to_complex(dF_tot.transpose(1, 0, 2)))
+        if lp:
+            dq[il] += np.einsum("lkij,kj->lki", stacked("on"), Fc)
+    if lp:
+        dq[il] += np.einsum("lkij,kj->lki", stacked("of"), Fk)
+    return {
+        p: PointSensitivity(dX=np.ascontiguousarray(dX_all[i]), dq_out=dq[i])
+        for i, p in enumerate(names)
+    }
