@@ -181,17 +181,29 @@ class _Basis:
             [c for k in order_k for c in (-k * np.sin(k * tau), k * np.cos(k * tau))]
         ).T
         self.Po = np.linalg.pinv(self.Eo)  # projection of samples on the order coefficients
+        # the parts apart: samples are real, and a complex product of which only the real
+        # part is kept (or with a real factor) costs twice the real products it needs
+        D = self.E * (1j * h)  # d/dtau of the samples
+        self._E = (self.E.real.copy(), self.E.imag.copy())
+        self._D = (D.real.copy(), D.imag.copy())
+        self._P = (self.P.real.copy(), self.P.imag.copy())
 
     def time(self, X: np.ndarray, omega: np.ndarray):
-        """Displacement and velocity samples (n, T, m) of phasors X (n, H+1, m)."""
-        u = (self.E @ X).real
-        hw = 1j * np.arange(self.H + 1)[None, :, None] * omega[:, None, None]
-        v = (self.E @ (X * hw)).real
+        """Displacement and velocity samples (n, T, m) of phasors X (n, H+1, m) at the steps'
+        base frequencies ``omega`` (n,)."""
+        Xr, Xi = np.ascontiguousarray(X.real), np.ascontiguousarray(X.imag)
+        u = self._E[0] @ Xr - self._E[1] @ Xi
+        v = (self._D[0] @ Xr - self._D[1] @ Xi) * omega[:, None, None]
         return u, v
 
     def phasors(self, x: np.ndarray) -> np.ndarray:
         """Phasors (n, H+1, m) of samples (n, T, m)."""
-        return self.P @ x
+        if np.iscomplexobj(x):
+            return self.P @ x
+        out = np.empty((*x.shape[:-2], self.H + 1, x.shape[-1]), complex)
+        np.matmul(self._P[0], x, out=out.real)
+        np.matmul(self._P[1], x, out=out.imag)
+        return out
 
 
 @dataclass
