@@ -181,29 +181,28 @@ class _Basis:
             [c for k in order_k for c in (-k * np.sin(k * tau), k * np.cos(k * tau))]
         ).T
         self.Po = np.linalg.pinv(self.Eo)  # projection of samples on the order coefficients
-        # the parts apart: samples are real, and a complex product of which only the real
-        # part is kept (or with a real factor) costs twice the real products it needs
+        # real arithmetic in one product over every step and signal: the samples are real,
+        # and a complex product per step, of which only the real part is kept, costs a
+        # multiple of it
         D = self.E * (1j * h)  # d/dtau of the samples
-        self._E = (self.E.real.copy(), self.E.imag.copy())
-        self._D = (D.real.copy(), D.imag.copy())
-        self._P = (self.P.real.copy(), self.P.imag.copy())
+        self._ED = np.hstack([np.vstack([M.real, -M.imag]) for M in (self.E.T, D.T)])
+        self._P = np.hstack([self.P.real.T, self.P.imag.T])  # (T, 2H+2)
 
     def time(self, X: np.ndarray, omega: np.ndarray):
         """Displacement and velocity samples (n, T, m) of phasors X (n, H+1, m) at the steps'
         base frequencies ``omega`` (n,)."""
-        Xr, Xi = np.ascontiguousarray(X.real), np.ascontiguousarray(X.imag)
-        u = self._E[0] @ Xr - self._E[1] @ Xi
-        v = (self._D[0] @ Xr - self._D[1] @ Xi) * omega[:, None, None]
-        return u, v
+        n, _, m = X.shape
+        parts = np.concatenate([X.real, X.imag], axis=1).transpose(0, 2, 1).reshape(n * m, -1)
+        uv = (parts @ self._ED).reshape(n, m, 2, self.n_time).transpose(2, 0, 3, 1)
+        return uv[0], uv[1] * omega[:, None, None]
 
     def phasors(self, x: np.ndarray) -> np.ndarray:
         """Phasors (n, H+1, m) of samples (n, T, m)."""
         if np.iscomplexobj(x):
             return self.P @ x
-        out = np.empty((*x.shape[:-2], self.H + 1, x.shape[-1]), complex)
-        np.matmul(self._P[0], x, out=out.real)
-        np.matmul(self._P[1], x, out=out.imag)
-        return out
+        n, _, m = x.shape
+        c = (x.transpose(0, 2, 1).reshape(n * m, -1) @ self._P).reshape(n, m, 2, self.H + 1)
+        return (c[:, :, 0] + 1j * c[:, :, 1]).transpose(0, 2, 1)
 
 
 @dataclass

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from analysis.diagnosis import Screen, default_candidates
 
@@ -79,3 +80,30 @@ def test_a_place_beyond_the_measured_scope_is_screened_when_given(runs, referenc
     )
     fit = Screen(reference_model, data, locations=(cand.location,)).fit(cand)
     assert fit.candidate is cand and all(np.isfinite(v) for v in fit.values.values())
+
+
+@pytest.mark.parametrize("m", [1, 3])
+def test_the_screens_samples_and_phasors_match_a_direct_synthesis(m):
+    """The screen's samples of phasors (displacement and velocity, each step at its own
+    frequency) against the sum of cosines written out, to 1e-12 of the largest; the phasors of
+    those samples give the phasors back (band-limited, 128 samples for 9 harmonics)."""
+    from analysis.diagnosis.screen import _Basis
+
+    rng = np.random.default_rng(3)
+    H, T, n = 9, 128, 7
+    b = _Basis(H, T, np.array([1, 2, 3]))
+    X = rng.standard_normal((n, H + 1, m)) + 1j * rng.standard_normal((n, H + 1, m))
+    X[:, 0] = X[:, 0].real
+    omega = rng.uniform(100.0, 200.0, n)
+    u, v = b.time(X, omega)
+    tau = 2 * np.pi * np.arange(T) / T
+    k = np.arange(H + 1)
+    phase = np.exp(1j * np.outer(tau, k))  # (T, H+1)
+    u_ref = np.einsum("th,nhm->ntm", phase, X).real
+    v_ref = np.einsum("th,nhm->ntm", phase * 1j * k, X).real * omega[:, None, None]
+    assert u.shape == v.shape == (n, T, m)
+    assert np.abs(u - u_ref).max() <= 1e-12 * np.abs(u_ref).max()
+    assert np.abs(v - v_ref).max() <= 1e-12 * np.abs(v_ref).max()
+    back = b.phasors(u)
+    assert np.abs(back - X).max() <= 1e-12 * np.abs(X).max()
+    assert np.abs(b.phasors(u.astype(complex)) - X).max() <= 1e-12 * np.abs(X).max()
