@@ -106,14 +106,14 @@ def point_sensitivities(
         # dX = J^-1 (G dF_p + dG F + dX_lin): one factorisation of J for every parameter
         rhs = (G @ dF_p.reshape(len(names), -1).T).T.reshape(dF_p.shape)
         if lp:
-            dnn = np.array(stacked("nn"))
+            dnn = stacked("nn")  # a new array: its harmonic 0 made real in place
             dnn[:, 0] = dnn[:, 0].real
             lin = np.einsum("lkij,kj->kli", dnn, Fc) + np.einsum("lkij,kj->kli", stacked("nf"), Fk)
             rhs[il] += b.from_complex(lin).transpose(1, 0, 2)  # as real_operator(dnn) @ F
         J = np.eye(b.size * n) - G @ dFdX
         dX_all = np.linalg.solve(J, rhs.reshape(len(names), -1).T).T.reshape(dF_p.shape)
         dF_tot = (dFdX @ dX_all.reshape(len(names), -1).T).T.reshape(dF_p.shape) + dF_p
-        dq += np.einsum("kij,kpj->pki", prep["rec"]["on"], b.to_complex(dF_tot.transpose(1, 0, 2)))
+        dq += np.einsum("kij,kpj->pki", rec["on"], b.to_complex(dF_tot.transpose(1, 0, 2)))
         if lp:
             dq[il] += np.einsum("lkij,kj->lki", stacked("on"), Fc)
     if lp:
