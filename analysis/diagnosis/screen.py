@@ -240,6 +240,7 @@ class _States:
     Pg: np.ndarray | None = None  # (n, K, nL, C) d g / d (weighted data)
     S0: np.ndarray | None = None
     first: tuple | None = None  # the model's elements' part of the first system
+    first_qr: _Projected | None = None  # its columns factorised (_first_lsq)
     X_init: np.ndarray | None = None
     maps: dict = field(default_factory=dict)
     known: dict = field(default_factory=dict)
@@ -861,11 +862,12 @@ class Screen:
                 # force and Jacobian vanish and the whitening is the model's own elements':
                 # computed once per location, shared by every law there
                 lin, Am, y0 = self._first_system(fr, st, X, incid, law, joint, theta, known, drive)
+                x, rss = self._first_lsq(st, Am, y0 + Am @ _current(lin.names, known, theta), lin)
             else:
                 lin, Am, y0 = self._iteration(
                     fr, st, X, incid, law, joint, theta, known, drive, it, params
                 )
-            x, rss = _bounded_lsq(Am, y0 + Am @ _current(lin.names, known, theta), lin.lower)
+                x, rss = _bounded_lsq(Am, y0 + Am @ _current(lin.names, known, theta), lin.lower)
             _take_values(lin.names, x, known, theta)
         return rss, 2 * K * C * n, theta, known
 
@@ -994,6 +996,21 @@ class Screen:
             Z = np.concatenate([Zk, Zc[:, :, 1:]], axis=2)
             Z[:, :, 0] += Zc[:, :, 0]
         return lc, Z[:, :, 1:].reshape(-1, Z.shape[2] - 1), Z[:, :, 0].ravel()
+
+    @staticmethod
+    def _first_lsq(st: _States, A: np.ndarray, y: np.ndarray, lin: _Forces):
+        """:func:`_bounded_lsq` of a first system, whose first columns (the model's elements')
+        are the same for every law at the location: factorised once (:class:`_Projected`),
+        each law reduces the problem to one of its size only."""
+        k = len(st.first[1])
+        if st.first_qr is None:
+            st.first_qr = _Projected(st.first[0][:, :, 1 : 1 + k].reshape(-1, k))
+        small = st.first_qr.reduce(A, y)
+        if small is None:
+            return _bounded_lsq(A, y, lin.lower)
+        x, _ = _bounded_lsq(*small, lin.lower)
+        r = y - A @ x
+        return x, float(r @ r)
 
     def _responses(self, R, W, g, columns, data=None) -> np.ndarray:
         """Weighted responses at the sensors (n, K, C, 1 + columns) at the measured orders,
@@ -1137,6 +1154,57 @@ def _job_screen(job: ScreenJob) -> Screen:
 
 
 _JOB_SCREEN: list = []
+
+
+class _Projected:
+    """Least squares ``min |y - [A_k, C] x|`` (bounded or not) for many ``C`` and ``y`` beside
+    one ``A_k``: ``A_k = Q R`` once; each ``C`` projected out of ``Q``'s span (twice, so that
+    the projection stays orthogonal to the rounding) and factorised gives the whole matrix's
+    triangular factor, and the problem becomes one of the size of ``x`` with the same
+    solution: ``min |Q'^T y - R' x|`` (``Q' = [Q, Q_C]``; the rest of ``y`` is orthogonal to
+    every column). Where the columns are nearly dependent (a diagonal of the triangular factor
+    below :data:`INDEPENDENT` of its column's norm: a law that exerts no force at the states,
+    a model element that does not either), :meth:`reduce` declines and the caller solves the
+    whole matrix (its minimum-norm solution)."""
+
+    def __init__(self, A_k: np.ndarray) -> None:
+        self.k = A_k.shape[1]
+        Q, R = np.linalg.qr(A_k)
+        self.Q: np.ndarray = Q
+        self.R: np.ndarray = R
+        self.ok = self.k > 0 and _independent(R, A_k)
+
+    def reduce(self, A: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(R', Q'^T y)`` for the whole matrix ``A`` (its first columns ``A_k``), None if
+        declined."""
+        k, C = self.k, A[:, self.k :]
+        if not self.ok or C.shape[1] == 0:
+            return None
+        Q, c = self.Q, C.shape[1]
+        Cy = np.column_stack([C, y])
+        a = Q.T @ Cy
+        P = Cy - Q @ a
+        a2 = Q.T @ P
+        P -= Q @ a2
+        a += a2
+        # the triangular factor of [C y] projected: C's factor and Q_C^T y in one
+        Ry = np.asarray(np.linalg.qr(P, mode="r"))
+        if not _independent(Ry[:c, :c], C):
+            return None
+        R = np.zeros((k + c, k + c))
+        R[:k, :k], R[:k, k:], R[k:, k:] = self.R, a[:, :c], Ry[:c, :c]
+        return R, np.concatenate([a[:, c], Ry[:c, c]])
+
+
+#: A column is independent of those before it when its triangular factor's diagonal is at
+#: least this share of its norm (numpy's least squares truncates at 2e-12 of the largest
+#: singular value of the column-scaled matrix: far below).
+INDEPENDENT = 1e-8
+
+
+def _independent(R: np.ndarray, A: np.ndarray) -> bool:
+    norms = np.linalg.norm(A, axis=0)
+    return bool(np.all(np.abs(np.diag(R)) > INDEPENDENT * norms) and np.all(norms > 0))
 
 
 def _bounded_lsq(A: np.ndarray, y: np.ndarray, lower: np.ndarray):

@@ -107,3 +107,41 @@ def test_the_screens_samples_and_phasors_match_a_direct_synthesis(m):
     back = b.phasors(u)
     assert np.abs(back - X).max() <= 1e-12 * np.abs(X).max()
     assert np.abs(b.phasors(u.astype(complex)) - X).max() <= 1e-12 * np.abs(X).max()
+
+
+@pytest.mark.parametrize("case", ["free", "bound", "zero column", "dependent"])
+def test_the_first_pass_least_squares_equals_that_of_the_whole_matrix(case):
+    """Every law at a location shares the model's elements' columns of its least squares:
+    factorised once, each law's problem reduced to its own size
+    (:class:`~analysis.diagnosis.screen._Projected`). The same solution and residual as the
+    whole matrix's (to 1e-10 of the largest value), with the bounds active or not; a law
+    column that is zero, or one that depends on the elements' columns, is left to the whole
+    matrix (the minimum-norm solution there)."""
+    from analysis.diagnosis.screen import _bounded_lsq, _Projected
+
+    rng = np.random.default_rng(7)
+    n, k, c = 600, 3, 2
+    A_k = rng.standard_normal((n, k)) * np.array([1.0, 1e3, 1e-4])  # unlike scales
+    C = rng.standard_normal((n, c))
+    truth = np.array([0.5, 2e-3, 4e3, 0.7, 1.3])
+    lower = np.array([0.0, 0.0, -np.inf, 0.0, 0.0])
+    if case == "bound":
+        truth[3] = -0.7  # the law's coefficient wants to be negative: held at zero
+    if case == "zero column":
+        C[:, 1] = 0.0
+    if case == "dependent":
+        C[:, 1] = A_k @ np.array([1.0, 1e-3, 1e4])
+    A = np.column_stack([A_k, C])
+    y = A @ truth + 0.01 * rng.standard_normal(n)
+    whole, rss_whole = _bounded_lsq(A, y, lower)
+    small = _Projected(A_k).reduce(A, y)
+    if case in ("zero column", "dependent"):
+        assert small is None
+        return
+    x, _ = _bounded_lsq(*small, lower)
+    rss = float((y - A @ x) @ (y - A @ x))
+    assert np.all(x >= lower)
+    assert np.abs(x - whole).max() <= 1e-10 * np.abs(whole).max()
+    assert abs(rss - rss_whole) <= 1e-10 * rss_whole
+    if case == "bound":
+        assert x[3] == 0.0 and whole[3] == 0.0
