@@ -240,7 +240,7 @@ class _States:
     Pg: np.ndarray | None = None  # (n, K, nL, C) d g / d (weighted data)
     S0: np.ndarray | None = None
     first: tuple | None = None  # the model's elements' part of the first system
-    first_qr: _Projected | None = None  # its columns factorised (_first_lsq)
+    first_qr: _Projected | None = None  # its columns factorised, made with it
     X_init: np.ndarray | None = None
     maps: dict = field(default_factory=dict)
     known: dict = field(default_factory=dict)
@@ -979,7 +979,9 @@ class Screen:
                     lk.g += f @ rows
             Ro = fr.R_o[:, :, : self.n_channels, 1:]
             r = self._responses(Ro, st.W, lk.g, lk.columns, st.Y - drive)
-            st.first = (_whiten(st.S0, r), tuple(lk.names), tuple(lk.lower))
+            Zk = _whiten(st.S0, r)
+            st.first = (Zk, tuple(lk.names), tuple(lk.lower))
+            st.first_qr = _Projected(Zk[:, :, 1:].reshape(-1, Zk.shape[2] - 1))
         Zk, names, lower = st.first
         lc = _Forces(np.zeros((0,)), None, [], list(names), list(lower))
         rows = next((rows for kind_, _, rows, _ in incid if kind_ == "cand"), None)
@@ -1002,10 +1004,7 @@ class Screen:
         """:func:`_bounded_lsq` of a first system, whose first columns (the model's elements')
         are the same for every law at the location: factorised once (:class:`_Projected`),
         each law reduces the problem to one of its size only."""
-        k = len(st.first[1])
-        if st.first_qr is None:
-            st.first_qr = _Projected(st.first[0][:, :, 1 : 1 + k].reshape(-1, k))
-        small = st.first_qr.reduce(A, y)
+        small = None if st.first_qr is None else st.first_qr.reduce(A, y)
         if small is None:
             return _bounded_lsq(A, y, lin.lower)
         x, _ = _bounded_lsq(*small, lin.lower)
@@ -1204,7 +1203,7 @@ INDEPENDENT = 1e-8
 
 def _independent(R: np.ndarray, A: np.ndarray) -> bool:
     norms = np.linalg.norm(A, axis=0)
-    return bool(np.all(np.abs(np.diag(R)) > INDEPENDENT * norms) and np.all(norms > 0))
+    return bool(np.all(np.abs(np.diag(R)) > INDEPENDENT * norms))  # a zero column fails too
 
 
 def _bounded_lsq(A: np.ndarray, y: np.ndarray, lower: np.ndarray):
